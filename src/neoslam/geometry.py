@@ -1,0 +1,132 @@
+"""SE(3), quaternion and alignment helpers on scipy's Rotation. Pure maths: no I/O, no plotting."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+__all__ = [
+    "make_pose",
+    "invert_pose",
+    "relative_pose",
+    "pose_from_quaternion",
+    "quaternion_from_pose",
+    "rotation_angle",
+    "yaw_of",
+    "yaw_pitch_roll",
+    "is_rotation_matrix",
+    "transform_points",
+    "SimilarityTransform",
+    "umeyama_alignment",
+]
+
+
+def make_pose(rotation: np.ndarray | Rotation, translation: np.ndarray) -> np.ndarray:
+    """4x4 homogeneous matrix from a rotation (matrix or Rotation) and a translation."""
+    pose = np.eye(4)
+    pose[:3, :3] = rotation.as_matrix() if isinstance(rotation, Rotation) else rotation
+    pose[:3, 3] = translation
+    return pose
+
+
+def invert_pose(pose: np.ndarray) -> np.ndarray:
+    """Inverse of one (4, 4) or a stack (n, 4, 4) of rigid transforms."""
+    rot_t = np.swapaxes(pose[..., :3, :3], -1, -2)
+    inverse = np.zeros_like(pose)
+    inverse[..., :3, :3] = rot_t
+    inverse[..., :3, 3] = -np.einsum("...ij,...j->...i", rot_t, pose[..., :3, 3])
+    inverse[..., 3, 3] = 1.0
+    return inverse
+
+
+def relative_pose(pose_a: np.ndarray, pose_b: np.ndarray) -> np.ndarray:
+    """T_a_b = T_a^-1 T_b: pose b seen from pose a (stacks broadcast)."""
+    return invert_pose(pose_a) @ pose_b
+
+
+def pose_from_quaternion(translation: np.ndarray, quaternion_xyzw: np.ndarray) -> np.ndarray:
+    """Stack of poses from (n, 3) translations and (n, 4) unit quaternions in TUM order (x, y, z, w)."""
+    translation = np.atleast_2d(translation)
+    poses = np.tile(np.eye(4), (len(translation), 1, 1))
+    poses[:, :3, :3] = Rotation.from_quat(np.atleast_2d(quaternion_xyzw)).as_matrix()
+    poses[:, :3, 3] = translation
+    return poses
+
+
+def quaternion_from_pose(poses: np.ndarray) -> np.ndarray:
+    """(n, 4) quaternions (x, y, z, w) with w >= 0 from (n, 4, 4) poses."""
+    quat = Rotation.from_matrix(poses[:, :3, :3]).as_quat()
+    return np.where(quat[:, 3:4] < 0, -quat, quat)
+
+
+def rotation_angle(rotation: np.ndarray) -> np.ndarray:
+    """Angle in radians of one (3, 3) or a stack of rotation matrices, robust near 0 and pi."""
+    trace = np.trace(rotation, axis1=-2, axis2=-1)
+    return np.arccos(np.clip((trace - 1.0) / 2.0, -1.0, 1.0))
+
+
+def yaw_pitch_roll(poses: np.ndarray) -> np.ndarray:
+    """(n, 3) intrinsic z-y'-x'' Euler angles (yaw, pitch, roll) of REP-103 robot poses."""
+    return Rotation.from_matrix(poses[..., :3, :3]).as_euler("ZYX")
+
+
+def yaw_of(poses: np.ndarray) -> np.ndarray:
+    """Heading about the world z axis (up), radians."""
+    return np.arctan2(poses[..., 1, 0], poses[..., 0, 0])
+
+
+def is_rotation_matrix(rotation: np.ndarray, tolerance: float) -> bool:
+    """True when R R^T = I within `tolerance` (max abs entry) and det R > 0."""
+    error = np.abs(rotation @ rotation.T - np.eye(3)).max()
+    return bool(error <= tolerance and np.linalg.det(rotation) > 0)
+
+
+def transform_points(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply a (4, 4) transform to (n, 3) points."""
+    return points @ pose[:3, :3].T + pose[:3, 3]
+
+
+@dataclass(frozen=True, slots=True)
+class SimilarityTransform:
+    """x' = s R x + t; with s = 1 a rigid SE(3) transform."""
+
+    rotation: np.ndarray
+    translation: np.ndarray
+    scale: float = 1.0
+
+    def apply_to_points(self, points: np.ndarray) -> np.ndarray:
+        return self.scale * points @ self.rotation.T + self.translation
+
+    def apply_to_poses(self, poses: np.ndarray) -> np.ndarray:
+        """Move poses T_world_robot into the target world; positions are scaled, orientations are not."""
+        moved = poses.copy()
+        moved[..., :3, :3] = self.rotation @ poses[..., :3, :3]
+        moved[..., :3, 3] = self.apply_to_points(poses[..., :3, 3])
+        return moved
+
+    def as_matrix(self) -> np.ndarray:
+        return make_pose(self.scale * self.rotation, self.translation)
+
+
+def umeyama_alignment(source: np.ndarray, target: np.ndarray, with_scale: bool = False) -> SimilarityTransform:
+    """Least-squares s, R, t with target ≈ s R source + t (Umeyama 1991), for (n, 3) point sets, n >= 3."""
+    if source.shape != target.shape or source.ndim != 2 or source.shape[1] != 3:
+        raise ValueError(f"need two (n, 3) point sets of equal shape, got {source.shape} and {target.shape}")
+    if len(source) < 3:
+        raise ValueError("alignment needs at least 3 points")
+    mean_src, mean_tgt = source.mean(axis=0), target.mean(axis=0)
+    src_c, tgt_c = source - mean_src, target - mean_tgt
+    covariance = tgt_c.T @ src_c / len(source)
+    u, singular, vt = np.linalg.svd(covariance)
+    sign = np.eye(3)
+    if np.linalg.det(u) * np.linalg.det(vt) < 0:  # reflection: flip the weakest axis
+        sign[2, 2] = -1.0
+    rotation = u @ sign @ vt
+    scale = 1.0
+    if with_scale:
+        variance = (src_c**2).sum() / len(source)
+        scale = float(np.trace(np.diag(singular) @ sign) / variance)
+    translation = mean_tgt - scale * rotation @ mean_src
+    return SimilarityTransform(rotation, translation, scale)

@@ -1,0 +1,1 @@
+"""Files in and out: trajectory formats, frame conventions, results folder."""
