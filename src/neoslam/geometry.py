@@ -20,6 +20,8 @@ __all__ = [
     "transform_points",
     "SimilarityTransform",
     "umeyama_alignment",
+    "integrate_body_velocities",
+    "body_velocities",
 ]
 
 
@@ -130,3 +132,35 @@ def umeyama_alignment(source: np.ndarray, target: np.ndarray, with_scale: bool =
         scale = float(np.trace(np.diag(singular) @ sign) / variance)
     translation = mean_tgt - scale * rotation @ mean_src
     return SimilarityTransform(rotation, translation, scale)
+
+
+def integrate_body_velocities(
+    linear_velocity: np.ndarray, angular_velocity: np.ndarray, timestamps: np.ndarray, start: np.ndarray | None = None
+) -> np.ndarray:
+    """Dead reckoning: T_i = T_{i-1} [exp(ω_i dt_i), v_i dt_i] with body-frame velocities of step i-1 -> i.
+
+    Row 0 of the velocities is ignored (there is no previous frame); the result starts at `start` (identity).
+    """
+    count = len(timestamps)
+    poses = np.empty((count, 4, 4))
+    poses[0] = np.eye(4) if start is None else start
+    if count == 1:
+        return poses
+    dt = np.diff(timestamps)[:, None]
+    steps = np.tile(np.eye(4), (count - 1, 1, 1))
+    steps[:, :3, :3] = Rotation.from_rotvec(angular_velocity[1:] * dt).as_matrix()
+    steps[:, :3, 3] = linear_velocity[1:] * dt
+    for i in range(1, count):
+        poses[i] = poses[i - 1] @ steps[i - 1]
+    return poses
+
+
+def body_velocities(poses: np.ndarray, timestamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of integrate_body_velocities: (n, 3) linear and angular body velocities, row 0 zero."""
+    steps = relative_pose(poses[:-1], poses[1:])
+    dt = np.diff(timestamps)[:, None]
+    linear = np.zeros((len(poses), 3))
+    angular = np.zeros((len(poses), 3))
+    linear[1:] = steps[:, :3, 3] / dt
+    angular[1:] = Rotation.from_matrix(steps[:, :3, :3]).as_rotvec() / dt
+    return linear, angular

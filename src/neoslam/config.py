@@ -1,0 +1,307 @@
+"""Configuration: one pydantic model per component, with the paper's values as documented defaults.
+
+Precedence, lowest first: defaults < YAML file (`--config`) < environment variables
+`NEOSLAM_<SECTION>__<FIELD>` (for example `NEOSLAM_EXPERIENCE_MAP__CORRECTION_FACTOR=0.3`).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from neoslam.errors import ConfigError, InputError
+
+__all__ = [
+    "CameraConfig",
+    "WorldConfig",
+    "DetectionNoiseConfig",
+    "OdometryNoiseConfig",
+    "NOISE_PROFILES",
+    "SimulatorConfig",
+    "GridCellConfig",
+    "HeadDirectionConfig",
+    "ObjectVectorConfig",
+    "HebbianConfig",
+    "KeyframeConfig",
+    "MatchingConfig",
+    "ExperienceMapConfig",
+    "ObjectMapConfig",
+    "EvaluationConfig",
+    "NeoSLAMConfig",
+    "load_config",
+    "dump_config",
+    "ENV_PREFIX",
+]
+
+ENV_PREFIX = "NEOSLAM_"
+ENV_NESTED_DELIMITER = "__"
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class CameraConfig(_Section):
+    """Rectified stereo camera; defaults are KITTI odometry sequences 04-12 (left grey camera)."""
+
+    fx: float = Field(707.0912, gt=0, description="focal length, px")
+    fy: float = Field(707.0912, gt=0, description="focal length, px")
+    cx: float = Field(601.8873, description="principal point x, px")
+    cy: float = Field(183.1104, description="principal point y, px")
+    width: int = Field(1226, gt=0, description="image width, px")
+    height: int = Field(370, gt=0, description="image height, px")
+    baseline: float = Field(0.5372, gt=0, description="stereo baseline, m (379.8145 / fx)")
+    height_above_ground: float = Field(1.65, gt=0, description="camera height above the road, m (KITTI)")
+    max_range: float = Field(40.0, gt=0, description="detections beyond this depth are not reported, m")
+    min_range: float = Field(1.0, gt=0, description="closer objects fill the view and are not reported, m")
+
+
+class WorldConfig(_Section):
+    """Static objects placed along a route the way a street holds them."""
+
+    spacing: float = Field(7.0, gt=0, description="mean gap between candidate object slots along the road, m")
+    occupancy: float = Field(0.55, ge=0, le=1, description="share of slots (each side) that hold an object")
+    lateral_offset: float = Field(5.0, gt=0, description="distance of parked objects from the route centre, m")
+    lateral_jitter: float = Field(0.6, ge=0, description="std of the lateral placement, m")
+    min_separation: float = Field(3.0, gt=0, description="no two objects closer than this, m")
+    revisit_radius: float = Field(8.0, gt=0, description="route points this close to an earlier pass place nothing")
+    class_mix: dict[str, float] = Field(
+        default_factory=lambda: {"car": 0.70, "truck": 0.08, "bicycle": 0.10, "person": 0.12},
+        description="relative frequency of each class",
+    )
+    moving_fraction: float = Field(0.0, ge=0, le=1, description="share of objects that move along the road")
+    moving_speed: float = Field(1.5, ge=0, description="speed of moving objects, m/s")
+
+
+class DetectionNoiseConfig(_Section):
+    """What YOLO plus ORB stereo matching get wrong."""
+
+    miss_rate: float = Field(0.1, ge=0, le=1, description="probability to miss a visible object, at zero range")
+    miss_rate_at_max_range: float = Field(0.4, ge=0, le=1, description="miss probability at max_range")
+    label_confusion: float = Field(0.02, ge=0, le=1, description="probability to report another class")
+    false_positives_per_frame: float = Field(0.2, ge=0, description="Poisson mean of spurious detections")
+    pixel_sigma: float = Field(1.0, ge=0, description="std of the detected centre in the image, px")
+    disparity_sigma: float = Field(0.3, ge=0, description="std of the object disparity, px (depth error ~ z^2)")
+    surface_bias: float = Field(
+        1.0, ge=0, le=1, description="share of the half-extent by which the stereo centre sits on the near surface"
+    )
+    box_sigma: float = Field(2.0, ge=0, description="std of each box edge, px")
+    patch_size: int = Field(16, gt=1, description="side of the grey appearance patch, px")
+    patch_noise: float = Field(10.0, ge=0, description="std of per-observation patch noise, grey levels")
+    patch_gain_sigma: float = Field(0.08, ge=0, description="std of the per-observation brightness gain")
+    texture_individuality: float = Field(
+        0.5, ge=0, le=1, description="0: all objects of a class look alike, 1: every object looks unique"
+    )
+
+
+class OdometryNoiseConfig(_Section):
+    """Noise of the visual odometry, applied to the true per-frame motion."""
+
+    sigma_speed: float = Field(0.2, ge=0, description="std of the forward speed, m/s, per frame")
+    sigma_yaw_rate: float = Field(0.01, ge=0, description="std of the yaw rate, rad/s, per frame")
+    speed_scale_bias: float = Field(0.01, description="relative speed error, +0.01 = 1 % too long")
+    yaw_rate_bias: float = Field(0.001, description="constant yaw-rate error, rad/s")
+    sigma_vertical_speed: float = Field(0.02, ge=0, description="std of the vertical speed, m/s")
+    sigma_pitch_rate: float = Field(0.002, ge=0, description="std of the pitch rate, rad/s")
+
+
+NOISE_PROFILES: dict[str, OdometryNoiseConfig] = {
+    "none": OdometryNoiseConfig(
+        sigma_speed=0.0,
+        sigma_yaw_rate=0.0,
+        speed_scale_bias=0.0,
+        yaw_rate_bias=0.0,
+        sigma_vertical_speed=0.0,
+        sigma_pitch_rate=0.0,
+    ),
+    "vo": OdometryNoiseConfig(),
+    "heavy": OdometryNoiseConfig(sigma_speed=1.0, sigma_yaw_rate=0.1, sigma_vertical_speed=0.1, sigma_pitch_rate=0.01),
+    # The upper ends of the paper's noise (section 4.3: 0..1 m/s and 0..0.5 rad/s).
+    "paper-max": OdometryNoiseConfig(
+        sigma_speed=1.0, sigma_yaw_rate=0.5, sigma_vertical_speed=0.1, sigma_pitch_rate=0.01
+    ),
+}
+
+
+class SimulatorConfig(_Section):
+    """`neoslam simulate`: world, camera, detection and odometry noise."""
+
+    seed: int = Field(0, description="seed of every random draw of a simulation")
+    camera: CameraConfig = CameraConfig()
+    world: WorldConfig = WorldConfig()
+    detection: DetectionNoiseConfig = DetectionNoiseConfig()
+    noise_profile: str = Field("vo", description="name of the odometry noise profile (see NOISE_PROFILES)")
+    odometry: OdometryNoiseConfig = OdometryNoiseConfig()
+    frame_period: float = Field(0.1037, gt=0, description="s between frames when no times are given (KITTI mean)")
+
+
+class GridCellConfig(_Section):
+    """3-D grid-cell continuous attractor network (paper 3.3, eq. 6; NeuroSLAM defaults)."""
+
+    dims: tuple[int, int, int] = Field((36, 36, 36), description="cells along x, y, z (all cyclic)")
+    excitation_size: int = Field(7, gt=0, description="excitatory kernel extent, cells")
+    excitation_sigma: float = Field(1.5, gt=0, description="δx = δy = δz of eq. 6, cells")
+    inhibition_size: int = Field(5, gt=0, description="inhibitory kernel extent, cells")
+    inhibition_sigma: float = Field(2.0, gt=0, description="inhibitory kernel σ, cells")
+    global_inhibition: float = Field(2e-4, ge=0, description="subtracted from every cell each step")
+    injection_energy: float = Field(0.1, ge=0, description="energy added at a recalled cell state")
+    packet_size: int = Field(4, ge=0, description="decode window = peak ± packet_size cells")
+    metres_per_cell: float = Field(2.0, gt=0, description="horizontal metres of motion per cell")
+    metres_per_cell_vertical: float = Field(1.0, gt=0, description="vertical metres of motion per cell")
+
+
+class HeadDirectionConfig(_Section):
+    """1-D ring of head-direction cells for yaw (paper 3.3: 36 cells)."""
+
+    cells: int = Field(36, gt=0, description="cells around the ring (10 degrees each)")
+    excitation_size: int = Field(7, gt=0, description="excitatory kernel extent, cells")
+    excitation_sigma: float = Field(1.9, gt=0, description="excitatory σ, cells (NeuroSLAM)")
+    inhibition_size: int = Field(5, gt=0, description="inhibitory kernel extent, cells")
+    inhibition_sigma: float = Field(3.0, gt=0, description="inhibitory σ, cells (NeuroSLAM)")
+    global_inhibition: float = Field(2e-4, ge=0, description="subtracted from every cell each step")
+    injection_energy: float = Field(0.1, ge=0, description="energy added at a recalled cell state")
+    packet_size: int = Field(5, ge=0, description="decode window = peak ± packet_size cells")
+
+
+class ObjectVectorConfig(_Section):
+    """Object-vector cells network (paper 3.4, eq. 7-13)."""
+
+    peak_rate: float = Field(1.2, description="a of eq. 7, Hz")
+    baseline_rate: float = Field(0.0, description="b of eq. 7, Hz")
+    field_sigma: float = Field(5.0, gt=0, description="σ of eq. 10, m")
+    preferred_distance: float = Field(10.0, ge=0, description="distance of the field's centre, m")
+    hidden_units: int = Field(32, gt=0, description="N hidden ELU units (eq. 12)")
+    learning_rate: float = Field(0.001, gt=0, description="paper: 0.001")
+    epochs: int = Field(10, gt=0, description="paper: 10")
+    keyframes_per_epoch: int = Field(20, gt=0, description="paper: 20")
+    seed: int = Field(0, description="weight initialisation and sampling seed")
+
+
+class HebbianConfig(_Section):
+    """Keyframe-to-cell associations (eq. 14)."""
+
+    learning_rate: float = Field(1.0, gt=0, description="τ of eq. 14")
+    sparsity: float = Field(0.1, gt=0, le=1, description="store only cells above this fraction of the peak")
+
+
+class KeyframeConfig(_Section):
+    """Object keyframes (paper 3.2)."""
+
+    e_max: float = Field(1.5, gt=0, description="e_max of eq. 2, m (paper)")
+    neighbourhood_radius: float = Field(1.5, gt=0, description="objects this close to the current one join it, m")
+
+
+class MatchingConfig(_Section):
+    """Keyframe matching and verification (eq. 2-5)."""
+
+    appearance_rmse_threshold: float = Field(80.0, gt=0, description="max patch RMSE, 0-255 grey (paper)")
+    score_threshold: float = Field(1.0, ge=0, description="a score above this is a loop-closure candidate (paper)")
+    min_inliers: int = Field(3, gt=0, description="matched objects needed to accept a closure")
+    max_fit_residual: float = Field(1.0, gt=0, description="max RMS residual of the rigid fit, m")
+    exclude_recent_keyframes: int = Field(50, ge=0, description="never match the most recent keyframes")
+    candidates: int = Field(5, gt=0, description="best retrieval candidates that are matched in full")
+
+
+class ExperienceMapConfig(_Section):
+    """Object experience map and its correction (paper 3.6, eq. 15-18)."""
+
+    gc_distance_threshold: float = Field(7.0, gt=0, description="max cell-space distance of a loop candidate, bins")
+    similarity_threshold: float = Field(3.0, gt=0, description="S_max of eq. 17, cells")
+    mu_gc: float = Field(1.0, ge=0, description="μ_gc of eq. 17")
+    mu_hdc: float = Field(1.0, ge=0, description="μ_hdc of eq. 17")
+    correction_factor: float = Field(0.5, gt=0, le=1, description="c_f of eq. 18 (NeuroSLAM: 0.5)")
+    correction_loops: int = Field(5, ge=0, description="relaxation passes per frame (NeuroSLAM: 5)")
+    backend: Literal["relaxation", "pose-graph"] = Field("relaxation", description="map correction back end")
+
+
+class ObjectMapConfig(_Section):
+    """The object map written to objects.csv: observations fused by label and distance."""
+
+    association_radius: float = Field(2.5, gt=0, description="an observation joins the nearest object this close, m")
+    min_observations: int = Field(3, gt=0, description="objects seen fewer times are left out of objects.csv")
+
+
+class EvaluationConfig(_Section):
+    """How results are judged against ground truth (never read by the SLAM path)."""
+
+    loop_max_distance: float = Field(5.0, gt=0, description="a true closure's frames are this close, m")
+    loop_min_frame_gap: int = Field(100, ge=0, description="and at least this many frames apart")
+    alignment: Literal["se3", "sim3", "none"] = Field("se3", description="alignment before ATE")
+    rpe_delta: float = Field(100.0, gt=0, description="RPE pair spacing")
+    rpe_unit: Literal["frames", "m"] = Field("m", description="unit of rpe_delta")
+    max_time_difference: float = Field(0.01, gt=0, description="timestamp association tolerance, s")
+
+
+class NeoSLAMConfig(_Section):
+    """Everything, one section per component."""
+
+    simulator: SimulatorConfig = SimulatorConfig()
+    grid_cells: GridCellConfig = GridCellConfig()
+    head_direction: HeadDirectionConfig = HeadDirectionConfig()
+    object_vector: ObjectVectorConfig = ObjectVectorConfig()
+    hebbian: HebbianConfig = HebbianConfig()
+    keyframes: KeyframeConfig = KeyframeConfig()
+    matching: MatchingConfig = MatchingConfig()
+    experience_map: ExperienceMapConfig = ExperienceMapConfig()
+    object_map: ObjectMapConfig = ObjectMapConfig()
+    evaluation: EvaluationConfig = EvaluationConfig()
+
+
+def _env_overrides(environ: dict[str, str]) -> dict[str, Any]:
+    """Nested dict from NEOSLAM_SECTION__FIELD[__FIELD] variables; values parsed as YAML scalars."""
+    overrides: dict[str, Any] = {}
+    for key, raw in sorted(environ.items()):
+        if not key.startswith(ENV_PREFIX) or ENV_NESTED_DELIMITER not in key:
+            continue  # NEOSLAM_DATA and friends are not configuration
+        path = key[len(ENV_PREFIX) :].lower().split(ENV_NESTED_DELIMITER)
+        node = overrides
+        for part in path[:-1]:
+            node = node.setdefault(part, {})
+        node[path[-1]] = yaml.safe_load(raw) if raw.strip() else raw
+    return overrides
+
+
+def _merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
+    merged = dict(base)
+    for key, value in override.items():
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = _merge(merged[key], value)
+        else:
+            merged[key] = value
+    return merged
+
+
+def _describe(error: ValidationError) -> str:
+    first = error.errors()[0]
+    where = ".".join(str(part) for part in first["loc"])
+    return f"{where}: {first['msg']}"
+
+
+def load_config(path: Path | None = None, environ: dict[str, str] | None = None) -> NeoSLAMConfig:
+    """Defaults, then the YAML file, then NEOSLAM_* environment variables."""
+    values: dict[str, Any] = {}
+    if path is not None:
+        if not path.is_file():
+            raise InputError(path, "config file not found")
+        try:
+            loaded = yaml.safe_load(path.read_text()) or {}
+        except yaml.YAMLError as error:
+            raise InputError(path, f"not valid YAML ({error.__class__.__name__})") from None
+        if not isinstance(loaded, dict):
+            raise InputError(path, "a config file must hold a mapping of sections")
+        values = loaded
+    env = _env_overrides(dict(os.environ if environ is None else environ))
+    try:
+        return NeoSLAMConfig.model_validate(_merge(values, env))
+    except ValidationError as error:
+        source = str(path) if path is not None else "configuration"
+        raise ConfigError(f"{source}: {_describe(error)} (after NEOSLAM_* overrides)") from None
+
+
+def dump_config(config: NeoSLAMConfig) -> str:
+    """The resolved configuration as YAML, sections in declaration order."""
+    return yaml.safe_dump(config.model_dump(mode="json"), sort_keys=False)

@@ -1,0 +1,204 @@
+"""The simulated dataset folder: one writer and one reader.
+
+```
+DATASET/
+  dataset.yaml           format, version, name, source, frame count, camera calibration, simulator settings
+  frames.csv             frame,timestamp,vx,vy,vz,wx,wy,wz   odometry: body-frame velocities of step i-1 -> i
+  detections.csv         frame,label,score,left_x1..left_y2,right_x1..right_y2,x,y,z   (centre in the optical frame)
+  patches.npy            (detections, s, s) uint8 grey patch of each detections.csv row, in row order
+  truth/                 read by evaluation only; deleting it does not change a run's map
+    poses_tum.txt        true robot poses (REP-103, TUM format)
+    objects.csv          id,label,x,y,z,length,width,height,yaw,vx,vy,vz
+    detections.csv       detection,object_id   (row of detections.csv -> object; -1 = false positive)
+```
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from neoslam.config import CameraConfig
+from neoslam.errors import InputError
+from neoslam.geometry import integrate_body_velocities
+from neoslam.io.tables import numeric_column, read_table, write_table
+from neoslam.io.trajectory_files import read_tum, write_tum
+from neoslam.sim.simulator import SimulatedRecording
+from neoslam.types import Frame, ObjectObservation, Trajectory
+
+__all__ = ["FORMAT", "VERSION", "SimulatedDataset", "write_dataset", "read_dataset", "is_simulated_dataset"]
+
+FORMAT = "neoslam-sim"
+VERSION = 1
+FRAME_COLUMNS = ("frame", "timestamp", "vx", "vy", "vz", "wx", "wy", "wz")
+BOX_COLUMNS = tuple(f"{side}_{c}" for side in ("left", "right") for c in ("x1", "y1", "x2", "y2"))
+DETECTION_COLUMNS = ("frame", "label", "score", *BOX_COLUMNS, "x", "y", "z")
+OBJECT_COLUMNS = ("id", "label", "x", "y", "z", "length", "width", "height", "yaw", "vx", "vy", "vz")
+
+
+def write_dataset(folder: Path, recording: SimulatedRecording) -> None:
+    """Write a recording into a new or empty folder (the caller makes it atomic)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    n = len(recording.truth)
+    meta = {
+        "format": FORMAT,
+        "version": VERSION,
+        "name": recording.name,
+        "source": recording.source,
+        "frames": n,
+        "camera": recording.config.camera.model_dump(mode="json"),
+        "simulator": recording.config.model_dump(mode="json"),
+    }
+    (folder / "dataset.yaml").write_text(yaml.safe_dump(meta, sort_keys=False))
+    velocities = np.column_stack([recording.linear_velocity, recording.angular_velocity])
+    frame_rows = [[i, f"{recording.truth.timestamps[i]:.6f}", *(f"{v:.9f}" for v in velocities[i])] for i in range(n)]
+    write_table(folder / "frames.csv", FRAME_COLUMNS, frame_rows)
+    detection_rows, truth_rows, patches = [], [], []
+    for frame, detections in enumerate(recording.detections):
+        for d in detections:
+            boxes = (f"{v:.2f}" for v in np.concatenate([d.box_left, d.box_right]))
+            centre = (f"{v:.4f}" for v in d.center_camera)
+            truth_rows.append([len(detection_rows), d.object_id])
+            detection_rows.append([frame, d.label, f"{d.score:.4f}", *boxes, *centre])
+            patches.append(d.patch)
+    size = recording.config.detection.patch_size
+    write_table(folder / "detections.csv", DETECTION_COLUMNS, detection_rows)
+    np.save(folder / "patches.npy", np.asarray(patches, dtype=np.uint8).reshape(-1, size, size))
+    _write_truth(folder / "truth", recording, truth_rows)
+
+
+def _write_truth(folder: Path, recording: SimulatedRecording, detection_objects: list[list[int]]) -> None:
+    folder.mkdir()
+    write_tum(folder / "poses_tum.txt", recording.truth)
+    w = recording.world
+    rows = [
+        [i, w.labels[i], *(f"{v:.4f}" for v in (*w.positions[i], *w.sizes[i], w.yaws[i], *w.velocities[i]))]
+        for i in range(len(w))
+    ]
+    write_table(folder / "objects.csv", OBJECT_COLUMNS, rows)
+    write_table(folder / "detections.csv", ("detection", "object_id"), detection_objects)
+
+
+@dataclass(frozen=True)
+class SimulatedDataset:
+    """A simulated dataset folder, read. `frames()` is all the SLAM path sees."""
+
+    folder: Path
+    name: str
+    camera: CameraConfig
+    timestamps: np.ndarray
+    linear_velocity: np.ndarray
+    angular_velocity: np.ndarray
+    observations: tuple[tuple[ObjectObservation, ...], ...]
+    ground_truth: Trajectory | None  # evaluation only
+
+    def __len__(self) -> int:
+        return len(self.timestamps)
+
+    def odometry(self) -> Trajectory:
+        poses = integrate_body_velocities(self.linear_velocity, self.angular_velocity, self.timestamps)
+        return Trajectory(self.timestamps, poses)
+
+    def frames(self):
+        """Frames in order, with the odometry integrated from the start pose (identity)."""
+        poses = self.odometry().poses
+        for i in range(len(self)):
+            yield Frame(
+                index=i,
+                timestamp=float(self.timestamps[i]),
+                odometry_pose=poses[i],
+                linear_velocity=self.linear_velocity[i],
+                angular_velocity=self.angular_velocity[i],
+                observations=self.observations[i],
+            )
+
+
+def is_simulated_dataset(folder: Path) -> bool:
+    return (folder / "dataset.yaml").is_file()
+
+
+def _read_meta(path: Path) -> dict:
+    if not path.is_file():
+        raise InputError(path, "not found: not a simulated dataset folder (made by `neoslam simulate`)")
+    try:
+        meta = yaml.safe_load(path.read_text())
+    except yaml.YAMLError:
+        raise InputError(path, "not valid YAML") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise InputError(path, f"format is not {FORMAT!r}")
+    if meta.get("version") != VERSION:
+        raise InputError(path, f"version {meta.get('version')!r} is not supported (this NeoSLAM reads {VERSION})")
+    try:
+        meta["camera"] = CameraConfig.model_validate(meta.get("camera", {}))
+    except ValueError as error:
+        raise InputError(path, f"camera calibration is invalid ({str(error).splitlines()[0]})") from None
+    return meta
+
+
+def _read_frames(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rows = read_table(path, FRAME_COLUMNS)
+    if not rows:
+        raise InputError(path, "no frames")
+    values = {name: numeric_column(path, rows, FRAME_COLUMNS, name) for name in FRAME_COLUMNS}
+    if not np.array_equal(values["frame"], np.arange(len(rows))):
+        bad = int(np.flatnonzero(values["frame"] != np.arange(len(rows)))[0])
+        raise InputError(path, f"frame {values['frame'][bad]:g} out of order, expected {bad}", line=bad + 2)
+    stamps = values["timestamp"]
+    back = np.flatnonzero(np.diff(stamps) <= 0)
+    if len(back):
+        raise InputError(path, f"timestamp {stamps[back[0] + 1]} does not increase", line=int(back[0]) + 3)
+    linear = np.column_stack([values[c] for c in ("vx", "vy", "vz")])
+    angular = np.column_stack([values[c] for c in ("wx", "wy", "wz")])
+    return stamps, linear, angular
+
+
+def _read_detections(folder: Path, frames: int) -> tuple[tuple[ObjectObservation, ...], ...]:
+    path = folder / "detections.csv"
+    rows = read_table(path, DETECTION_COLUMNS)
+    numeric = [c for c in DETECTION_COLUMNS if c != "label"]
+    values = {name: numeric_column(path, rows, DETECTION_COLUMNS, name) for name in numeric}
+    patches = _read_patches(folder / "patches.npy", len(rows))
+    per_frame: list[list[ObjectObservation]] = [[] for _ in range(frames)]
+    for k, row in enumerate(rows):
+        frame = values["frame"][k]
+        if frame != int(frame) or not 0 <= frame < frames:
+            raise InputError(path, f"frame {frame:g} is not one of the {frames} frames", line=k + 2)
+        box = np.array([values[c][k] for c in BOX_COLUMNS])
+        centre = np.array([values[c][k] for c in ("x", "y", "z")])
+        if centre[2] <= 0:
+            raise InputError(path, f"object centre has depth {centre[2]} m (must be in front of the camera)", k + 2)
+        per_frame[int(frame)].append(
+            ObjectObservation(row[1], float(values["score"][k]), box[:4], box[4:], centre, patches[k])
+        )
+    return tuple(tuple(observations) for observations in per_frame)
+
+
+def _read_patches(path: Path, count: int) -> np.ndarray:
+    if not path.is_file():
+        raise InputError(path, "file not found")
+    try:
+        patches = np.load(path, allow_pickle=False)
+    except (ValueError, OSError) as error:
+        raise InputError(path, f"not a readable .npy array ({error})") from None
+    if patches.ndim != 3 or patches.dtype != np.uint8 or len(patches) != count:
+        raise InputError(path, f"expected ({count}, s, s) uint8 patches, found {patches.shape} {patches.dtype}")
+    return patches
+
+
+def read_dataset(folder: Path) -> SimulatedDataset:
+    """Read a simulated dataset folder; ground truth is attached when `truth/` exists."""
+    if not folder.is_dir():
+        raise InputError(folder, "dataset folder not found")
+    meta = _read_meta(folder / "dataset.yaml")
+    stamps, linear, angular = _read_frames(folder / "frames.csv")
+    if meta.get("frames") != len(stamps):
+        raise InputError(folder / "frames.csv", f"{len(stamps)} frames, dataset.yaml says {meta.get('frames')}")
+    observations = _read_detections(folder, len(stamps))
+    truth_file = folder / "truth" / "poses_tum.txt"
+    truth = read_tum(truth_file) if truth_file.is_file() else None
+    if truth is not None and len(truth) != len(stamps):
+        raise InputError(truth_file, f"{len(truth)} poses for {len(stamps)} frames")
+    return SimulatedDataset(folder, str(meta["name"]), meta["camera"], stamps, linear, angular, observations, truth)

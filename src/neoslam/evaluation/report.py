@@ -1,0 +1,53 @@
+"""The metrics of a run against ground truth, as the JSON-ready blocks of metrics.json."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from neoslam.config import EvaluationConfig
+from neoslam.evaluation.loops import LoopCriteria, evaluate_closures
+from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error, kitti_drift, relative_pose_error
+from neoslam.types import LoopClosure, Trajectory
+
+__all__ = ["trajectory_metrics", "loop_metrics", "timing_metrics"]
+
+
+def _finite(value: float) -> float | None:
+    return None if math.isnan(value) else round(float(value), 6)
+
+
+def trajectory_metrics(estimate: Trajectory, truth: Trajectory, config: EvaluationConfig) -> dict[str, Any]:
+    """ATE (aligned as configured), RPE and KITTI drift of one estimate whose poses match truth frame by frame."""
+    ate = absolute_trajectory_error(estimate, truth, align=config.alignment)
+    rpe = relative_pose_error(estimate, truth, delta=config.rpe_delta, unit=config.rpe_unit)
+    drift = kitti_drift(estimate, truth)
+    return {
+        "ate_rmse_m": _finite(ate.rmse),
+        "ate_max_m": _finite(ate.max),
+        "rpe_translation_rmse_m": _finite(rpe.translation.rmse),
+        "rpe_rotation_rmse_deg": _finite(rpe.rotation.rmse),
+        "kitti_translation_percent": _finite(drift.translation_percent),
+        "kitti_rotation_deg_per_100m": _finite(drift.rotation_deg_per_100m),
+    }
+
+
+def loop_metrics(closures: list[LoopClosure], truth: Trajectory | None, config: EvaluationConfig) -> dict[str, Any]:
+    """The loops block: counts always, precision and recall only when ground truth exists."""
+    block: dict[str, Any] = {"accepted": len(closures)}
+    if truth is None:
+        return block
+    criteria = LoopCriteria(config.loop_max_distance, config.loop_min_frame_gap)
+    return block | evaluate_closures(closures, truth.positions, criteria).as_dict()
+
+
+def timing_metrics(frame_times_s: np.ndarray, wall_s: float) -> dict[str, float]:
+    frames = max(len(frame_times_s), 1)
+    return {
+        "wall_s": round(wall_s, 3),
+        "fps": round(frames / wall_s, 2) if wall_s > 0 else 0.0,
+        "ms_per_frame_median": round(float(np.median(frame_times_s)) * 1e3, 4) if len(frame_times_s) else 0.0,
+        "ms_per_frame_p95": round(float(np.percentile(frame_times_s, 95)) * 1e3, 4) if len(frame_times_s) else 0.0,
+    }

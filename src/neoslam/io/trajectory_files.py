@@ -1,0 +1,205 @@
+"""Read and write trajectories as TUM and KITTI text files, with KITTI `times.txt` timestamps.
+
+TUM files (`t x y z qx qy qz qw`) hold robot poses (REP-103) and are used as they are. KITTI files hold camera
+poses (x right, y down, z forward) and go through `neoslam.io.frames` on the way in and out. Every problem
+with an input file is an `InputError` naming the file and, where there is one, the 1-based line.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from neoslam.errors import InputError, OutputError
+from neoslam.geometry import pose_from_quaternion, quaternion_from_pose
+from neoslam.io.frames import camera_poses_to_robot, robot_poses_to_camera
+from neoslam.types import Trajectory
+
+__all__ = [
+    "KITTI_FRAME_PERIOD",
+    "QUATERNION_NORM_TOLERANCE",
+    "ROTATION_TOLERANCE",
+    "read_tum",
+    "read_kitti",
+    "read_times",
+    "read_trajectory",
+    "write_tum",
+    "write_kitti",
+    "write_times",
+]
+
+# Mean frame step of KITTI's times files (0.1037 s in sequence 00, 0.1039 s in 06); used when a sequence
+# comes without its times.txt, as sequence 05 does in the shared data.
+KITTI_FRAME_PERIOD = 0.1037
+
+# TUM files written with 4-6 decimals have quaternion norms within ~1e-4 of one, so rounding passes; a norm
+# further off than 1e-2 means a wrong column order or a corrupt file, which normalising would hide.
+QUATERNION_NORM_TOLERANCE = 1e-2
+
+# max |R R^T - I| allowed in a KITTI rotation block. The published ground truth is orthonormal to 3e-7; 1e-3
+# also admits float32 or hand-rounded estimates but rejects scaled, sheared or misread blocks.
+ROTATION_TOLERANCE = 1e-3
+
+# Commas with optional spaces, or runs of whitespace; "1,,2" yields an empty token, reported as not a number.
+_SEPARATOR = re.compile(r"\s*,\s*|\s+")
+_TUM_COLUMNS = 8
+_KITTI_COLUMNS = 12
+
+
+def _data_lines(path: Path) -> list[tuple[int, list[str]]]:
+    """(line number, tokens) of every line that is neither blank nor a `#` comment."""
+    try:
+        text = path.read_text(encoding="utf-8-sig")  # -sig: tolerate a byte-order mark from Windows editors
+    except FileNotFoundError:
+        raise InputError(path, "file not found") from None
+    except IsADirectoryError:
+        raise InputError(path, "is a folder, not a file") from None
+    except UnicodeDecodeError:
+        raise InputError(path, "not a text file (not UTF-8)") from None
+    except OSError as exc:
+        raise InputError(path, f"cannot be read ({exc.strerror})") from None
+    rows = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        stripped = line.strip()
+        if stripped and not stripped.startswith("#"):
+            rows.append((number, _SEPARATOR.split(stripped)))
+    if not rows:
+        raise InputError(path, "no data lines (the file is empty or only has comments)")
+    return rows
+
+
+def _read_numbers(path: Path, columns: int) -> tuple[np.ndarray, np.ndarray]:
+    """(n, columns) finite floats and the (n,) line number each row came from."""
+    rows = _data_lines(path)
+    values = np.empty((len(rows), columns))
+    for i, (number, tokens) in enumerate(rows):
+        if len(tokens) != columns:
+            raise InputError(path, f"{len(tokens)} columns found, {columns} expected", number)
+        for j, token in enumerate(tokens):
+            try:
+                values[i, j] = float(token)
+            except ValueError:
+                raise InputError(path, f"not a number: {token!r}", number) from None
+            if not np.isfinite(values[i, j]):
+                raise InputError(path, f"value is not finite: {token!r}", number)
+    return values, np.array([number for number, _ in rows])
+
+
+def _check_increasing(path: Path, times: np.ndarray, lines: np.ndarray) -> None:
+    step_back = np.flatnonzero(np.diff(times) <= 0)
+    if step_back.size:
+        i = step_back[0]
+        verb = "repeats" if times[i + 1] == times[i] else "goes back from"
+        problem = f"timestamp {times[i + 1]} {verb} {times[i]} at line {lines[i]}"
+        raise InputError(path, problem, int(lines[i + 1]))
+
+
+def read_times(path: str | Path) -> np.ndarray:
+    """Strictly increasing timestamps in seconds, one per line (KITTI `times.txt`)."""
+    path = Path(path)
+    values, lines = _read_numbers(path, 1)
+    _check_increasing(path, values[:, 0], lines)
+    return values[:, 0]
+
+
+def read_tum(path: str | Path) -> Trajectory:
+    """Robot poses from a TUM file `t x y z qx qy qz qw`; quaternions are normalised."""
+    path = Path(path)
+    values, lines = _read_numbers(path, _TUM_COLUMNS)
+    _check_increasing(path, values[:, 0], lines)
+    quaternions = values[:, 4:8]
+    norms = np.linalg.norm(quaternions, axis=1)
+    bad = np.flatnonzero(np.abs(norms - 1.0) > QUATERNION_NORM_TOLERANCE)
+    if bad.size:
+        i = bad[0]
+        problem = "zero quaternion" if norms[i] == 0 else f"non-unit quaternion (norm {norms[i]:.3g})"
+        raise InputError(path, problem, int(lines[i]))
+    poses = pose_from_quaternion(values[:, 1:4], quaternions / norms[:, None])
+    return Trajectory(values[:, 0].copy(), poses)
+
+
+def read_kitti(
+    path: str | Path, times_path: str | Path | None = None, frame_period: float = KITTI_FRAME_PERIOD
+) -> Trajectory:
+    """Robot poses from a KITTI pose file (camera poses, 12 floats a line).
+
+    Timestamps come from `times_path` (KITTI `times.txt`) or, without one, are `index * frame_period`.
+    """
+    if not frame_period > 0:
+        raise ValueError(f"frame_period must be positive, got {frame_period}")
+    path = Path(path)
+    values, lines = _read_numbers(path, _KITTI_COLUMNS)
+    camera_poses = np.tile(np.eye(4), (len(values), 1, 1))
+    camera_poses[:, :3, :] = values.reshape(-1, 3, 4)
+    rotations = camera_poses[:, :3, :3]
+    errors = np.abs(rotations @ np.swapaxes(rotations, 1, 2) - np.eye(3)).max(axis=(1, 2))
+    determinants = np.linalg.det(rotations)
+    bad = np.flatnonzero((errors > ROTATION_TOLERANCE) | (determinants <= 0))
+    if bad.size:
+        i = bad[0]
+        if errors[i] > ROTATION_TOLERANCE:
+            problem = f"rotation is not orthonormal (|RR^T - I| = {errors[i]:.3g})"
+        else:
+            problem = f"rotation is a reflection (det = {determinants[i]:.3g})"
+        raise InputError(path, problem, int(lines[i]))
+    if times_path is None:
+        timestamps = np.arange(len(values)) * frame_period
+    else:
+        timestamps = read_times(times_path)
+        if len(timestamps) != len(values):
+            problem = f"{len(timestamps)} timestamps for the {len(values)} poses of {path.name}"
+            raise InputError(times_path, problem)
+    return Trajectory(timestamps, camera_poses_to_robot(camera_poses))
+
+
+def read_trajectory(
+    path: str | Path, fmt: str, times_path: str | Path | None = None, frame_period: float = KITTI_FRAME_PERIOD
+) -> Trajectory:
+    """Read a trajectory as "tum", "kitti" or "auto" (8 columns: TUM, 12: KITTI, from the first data line)."""
+    path = Path(path)
+    if fmt not in ("tum", "kitti", "auto"):
+        raise InputError(path, f"unknown trajectory format {fmt!r} (expected 'tum', 'kitti' or 'auto')")
+    if fmt == "auto":
+        number, tokens = _data_lines(path)[0]
+        formats = {_TUM_COLUMNS: "tum", _KITTI_COLUMNS: "kitti"}
+        if len(tokens) not in formats:
+            problem = f"cannot tell the format: {len(tokens)} columns found (8 for TUM, 12 for KITTI)"
+            raise InputError(path, problem, number)
+        fmt = formats[len(tokens)]
+    if fmt == "kitti":
+        return read_kitti(path, times_path, frame_period)
+    if times_path is not None:
+        # TUM lines carry their own timestamps; silently ignoring a times file would hide a mix-up.
+        raise InputError(times_path, f"a times file is only used with KITTI poses, and {path.name} is TUM")
+    return read_tum(path)
+
+
+def _write_lines(path: str | Path, lines: list[str]) -> None:
+    try:
+        Path(path).write_text("".join(line + "\n" for line in lines), encoding="utf-8")
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot be written ({exc.strerror})") from None
+
+
+def write_tum(path: str | Path, trajectory: Trajectory) -> None:
+    """TUM file `t x y z qx qy qz qw` of the robot poses; quaternions with w >= 0."""
+    quaternions = quaternion_from_pose(trajectory.poses)
+    rows = np.hstack([trajectory.positions, quaternions])
+    lines = [
+        f"{t:.6f} " + " ".join(f"{v:.9f}" for v in row) for t, row in zip(trajectory.timestamps, rows, strict=True)
+    ]
+    _write_lines(path, lines)
+
+
+def write_kitti(path: str | Path, trajectory: Trajectory) -> None:
+    """KITTI pose file (camera poses, 12 numbers a line); the timestamps are not written (see write_times)."""
+    rows = robot_poses_to_camera(trajectory.poses)[:, :3, :].reshape(-1, 12)
+    _write_lines(path, [" ".join(f"{v:.9e}" for v in row) for row in rows])
+
+
+def write_times(path: str | Path, timestamps: np.ndarray) -> None:
+    """KITTI-style times file, one timestamp in seconds per line."""
+    # 9 decimals: exact for KITTI's 7-digit times and keeps sub-microsecond digits of Unix times.
+    _write_lines(path, [f"{t:.9f}" for t in np.asarray(timestamps, dtype=float)])

@@ -1,0 +1,158 @@
+"""The work behind each CLI command: simulate a dataset, run NeoSLAM on one, evaluate trajectory files."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from neoslam.config import NOISE_PROFILES, NeoSLAMConfig
+from neoslam.datasets.simulated import SimulatedDataset, is_simulated_dataset, read_dataset, write_dataset
+from neoslam.errors import ConfigError, InputError
+from neoslam.evaluation.report import loop_metrics, timing_metrics, trajectory_metrics
+from neoslam.evaluation.trajectory_metrics import align, associate
+from neoslam.io.atomic import atomic_directory
+from neoslam.io.results import (
+    read_loop_closures,
+    write_config,
+    write_loop_closures,
+    write_metrics,
+    write_objects,
+    write_trajectories,
+)
+from neoslam.io.trajectory_files import read_trajectory
+from neoslam.pipeline import RunResult, run
+from neoslam.sim.routes import ROUTES, drive_route
+from neoslam.sim.simulator import SimulatedRecording, simulate
+from neoslam.types import Trajectory
+from neoslam.viz.plots import plot_error_along_route, plot_map_2d, plot_map_3d
+
+__all__ = ["DEFAULT_ROUTE", "simulation_config", "record", "simulate_dataset", "run_dataset", "evaluate_files"]
+
+DEFAULT_ROUTE = "town"
+
+
+def simulation_config(config: NeoSLAMConfig, noise: str | None, seed: int | None) -> NeoSLAMConfig:
+    """The config with a named odometry noise profile and a seed applied to its simulator section."""
+    update: dict[str, Any] = {}
+    if noise is not None:
+        if noise not in NOISE_PROFILES:
+            raise ConfigError(f"unknown noise profile {noise!r}; choose one of {', '.join(NOISE_PROFILES)}")
+        update |= {"noise_profile": noise, "odometry": NOISE_PROFILES[noise]}
+    if seed is not None:
+        update["seed"] = seed
+    return config.model_copy(update={"simulator": config.simulator.model_copy(update=update)})
+
+
+def record(
+    config: NeoSLAMConfig,
+    trajectory: Path | None = None,
+    fmt: str = "auto",
+    times: Path | None = None,
+    route: str | None = None,
+    progress: bool = False,
+) -> SimulatedRecording:
+    """Simulate along a trajectory file or a built-in route."""
+    sim = config.simulator
+    if trajectory is not None:
+        truth = read_trajectory(trajectory, fmt, times, frame_period=sim.frame_period)
+        return simulate(truth, sim, name=trajectory.stem, source=str(trajectory), progress=progress)
+    name = route or DEFAULT_ROUTE
+    if name not in ROUTES:
+        raise ConfigError(f"unknown route {name!r}; built-in routes: {', '.join(sorted(ROUTES))}")
+    truth = drive_route(ROUTES[name], sim.frame_period, sim.camera.height_above_ground)
+    return simulate(truth, sim, name=name, source=f"route:{name}", progress=progress, route=ROUTES[name])
+
+
+def simulate_dataset(out: Path, recording: SimulatedRecording, overwrite: bool = False) -> None:
+    with atomic_directory(out, overwrite) as staging:
+        write_dataset(staging, recording)
+
+
+def _load(data: Path) -> SimulatedDataset:
+    if not data.exists():
+        raise InputError(data, "dataset folder not found")
+    if is_simulated_dataset(data):
+        return read_dataset(data)
+    if (data / "sequences").is_dir():
+        raise InputError(data, "KITTI image sequences need the perception front end, which is not built yet")
+    raise InputError(data, "neither a simulated dataset (dataset.yaml) nor a KITTI odometry root (sequences/)")
+
+
+def _metrics(dataset: SimulatedDataset, result: RunResult, config: NeoSLAMConfig, wall_s: float) -> dict[str, Any]:
+    metrics: dict[str, Any] = {"dataset": dataset.name, "frames": len(dataset)}
+    truth = dataset.ground_truth
+    if truth is not None:
+        evaluation = config.evaluation
+        odometry = trajectory_metrics(result.odometry, truth, evaluation)
+        corrected = trajectory_metrics(result.estimate, truth, evaluation)
+        metrics["ate_rmse_m"] = {"odometry": odometry["ate_rmse_m"], "corrected": corrected["ate_rmse_m"]}
+        metrics["trajectory"] = {"alignment": evaluation.alignment, "odometry": odometry, "corrected": corrected}
+    metrics["loops"] = loop_metrics(result.loop_closures, truth, config.evaluation)
+    metrics["objects"] = len(result.objects)
+    metrics["timing"] = timing_metrics(result.frame_times_s, wall_s)
+    return metrics
+
+
+def _plots(folder: Path, result: RunResult, truth: Trajectory | None) -> None:
+    folder.mkdir()
+    estimates = {"odometry": result.odometry, "corrected": result.estimate}
+    if truth is None:
+        plot_map_2d(folder / "map_2d.png", estimates, result.objects)
+        plot_map_3d(folder / "map_3d.png", estimates)
+        return
+    # Show the estimates where they best fit the truth (the same SE(3) alignment as the ATE).
+    aligned = {name: align(estimate, truth, "se3")[0] for name, estimate in estimates.items()}
+    transform = align(result.estimate, truth, "se3")[1]
+    objects = [replace(o, position=transform.apply_to_points(o.position[None])[0]) for o in result.objects]
+    plot_map_2d(folder / "map_2d.png", {"ground truth": truth, **aligned}, objects)
+    plot_map_3d(folder / "map_3d.png", {"ground truth": truth, **aligned})
+    plot_error_along_route(folder / "error_along_route.png", truth, aligned)
+
+
+def run_dataset(
+    data: Path | None, out: Path, config: NeoSLAMConfig, overwrite: bool = False, progress: bool = True
+) -> dict[str, Any]:
+    """Run NeoSLAM on a dataset folder (or simulate the default scenario first) and write the results folder."""
+    with atomic_directory(out, overwrite) as staging:
+        if data is None:
+            write_dataset(staging / "dataset", record(config, route=DEFAULT_ROUTE, progress=progress))
+            data = staging / "dataset"
+        dataset = _load(data)
+        start = time.perf_counter()
+        result = run(dataset.frames(), config, total=len(dataset), progress=progress)
+        wall_s = time.perf_counter() - start
+        trajectories = {"trajectory": result.estimate, "odometry": result.odometry}
+        if dataset.ground_truth is not None:
+            trajectories["groundtruth"] = dataset.ground_truth
+        write_trajectories(staging, trajectories)
+        write_loop_closures(staging / "loop_closures.csv", result.loop_closures)
+        write_objects(staging / "objects.csv", result.objects)
+        write_config(staging / "config.yaml", config)
+        metrics = _metrics(dataset, result, config, wall_s)
+        write_metrics(staging / "metrics.json", metrics)
+        _plots(staging / "plots", result, dataset.ground_truth)
+    return metrics
+
+
+def evaluate_files(
+    estimate_path: Path,
+    truth_path: Path,
+    config: NeoSLAMConfig,
+    estimate_format: str = "auto",
+    truth_format: str = "auto",
+    loops_path: Path | None = None,
+) -> dict[str, Any]:
+    """Metrics of an estimate file against a ground-truth file (timestamps associated first)."""
+    estimate = read_trajectory(estimate_path, estimate_format)
+    truth = read_trajectory(truth_path, truth_format)
+    try:
+        matched_estimate, matched_truth = associate(estimate, truth, config.evaluation.max_time_difference)
+    except ValueError as error:
+        raise InputError(estimate_path, f"cannot be matched with {truth_path.name}: {error}") from None
+    metrics: dict[str, Any] = {"matched_poses": len(matched_estimate), "alignment": config.evaluation.alignment}
+    metrics |= trajectory_metrics(matched_estimate, matched_truth, config.evaluation)
+    if loops_path is not None:
+        metrics["loops"] = loop_metrics(read_loop_closures(loops_path), truth, config.evaluation)
+    return metrics

@@ -1,0 +1,1 @@
+"""Simulation of what a robot with a stereo camera and an object detector records along a trajectory."""

@@ -1,0 +1,150 @@
+"""Per frame, what YOLO plus ORB stereo matching report about the objects in view: label (sometimes confused),
+score, left and right boxes, a triangulated centre with disparity noise, misses, false positives and a patch."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from neoslam.config import CameraConfig, DetectionNoiseConfig
+from neoslam.io.frames import robot_points_to_camera
+from neoslam.sim.camera import StereoCamera
+from neoslam.sim.world import World
+
+__all__ = ["SimulatedDetection", "DetectionSimulator"]
+
+FALSE_POSITIVE = -1  # object id of a detection with no object behind it
+MIN_DISPARITY = 0.5  # px: stereo matching gives up below this
+SCORE_NEAR, SCORE_FAR, SCORE_SIGMA = 0.9, 0.55, 0.08  # detector confidence falls with range
+SCORE_RANGE = (0.3, 0.99)
+FALSE_POSITIVE_SCORE = (0.3, 0.6)
+FALSE_POSITIVE_BOX_PX = (15.0, 120.0)  # side of a spurious box
+BOX_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float) / 2
+
+
+@dataclass(frozen=True)
+class SimulatedDetection:
+    label: str
+    score: float
+    box_left: np.ndarray
+    box_right: np.ndarray
+    center_camera: np.ndarray
+    patch: np.ndarray  # uint8
+    object_id: int  # truth only: the object behind it, or FALSE_POSITIVE
+
+
+def _yaw_matrix(yaw: float) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+class DetectionSimulator:
+    """Detections of a world's objects from a stereo camera whose optical centre is the robot frame's origin."""
+
+    def __init__(self, world: World, camera: CameraConfig, noise: DetectionNoiseConfig) -> None:
+        self.world = world
+        self.camera = StereoCamera(camera)
+        self.noise = noise
+        self.labels = sorted(set(world.labels.tolist()) | {"car", "truck", "bicycle", "person"})
+        static = np.linalg.norm(world.velocities, axis=1) == 0
+        self._static_ids = np.flatnonzero(static)
+        self._moving_ids = np.flatnonzero(~static)
+        self._tree = cKDTree(world.positions[static, :2]) if static.any() else None
+
+    def _nearby(self, pose: np.ndarray, positions: np.ndarray) -> np.ndarray:
+        reach = self.camera.config.max_range + max(self.world.sizes.max(initial=0.0), 0.0)
+        ids = []
+        if self._tree is not None:
+            ids = self._static_ids[self._tree.query_ball_point(pose[:2, 3], reach)].tolist()
+        moving = self._moving_ids[np.linalg.norm(positions[self._moving_ids, :2] - pose[:2, 3], axis=1) < reach]
+        return np.array(sorted(ids + moving.tolist()), dtype=int)
+
+    def detect(self, pose: np.ndarray, time: float, rng: np.random.Generator) -> list[SimulatedDetection]:
+        """Detections at one true robot pose T_world_robot."""
+        positions = self.world.positions_at(time)
+        detections = [d for i in self._nearby(pose, positions) if (d := self._observe(i, positions[i], pose, rng))]
+        detections += self._false_positives(rng)
+        return detections
+
+    def _to_camera(self, pose: np.ndarray, points: np.ndarray) -> np.ndarray:
+        return robot_points_to_camera((points - pose[:3, 3]) @ pose[:3, :3])
+
+    def _measured_centre(self, index: int, centre: np.ndarray, pose: np.ndarray) -> np.ndarray:
+        """Stereo points lie on the visible surface: move the centre towards the camera along the ray."""
+        ray = centre - pose[:3, 3]
+        ray /= np.linalg.norm(ray)
+        in_object = _yaw_matrix(self.world.yaws[index]).T @ ray
+        radius = 1.0 / np.sqrt(((in_object / (self.world.sizes[index] / 2)) ** 2).sum())
+        return centre - self.noise.surface_bias * radius * ray
+
+    def _observe(self, index: int, centre: np.ndarray, pose: np.ndarray, rng) -> SimulatedDetection | None:
+        cam = self.camera.config
+        centre_cam = self._to_camera(pose, centre[None])[0]
+        depth = centre_cam[2]
+        if not cam.min_range <= depth <= cam.max_range:
+            return None
+        pixel, _ = self.camera.project(centre_cam[None])
+        if not self.camera.in_image(pixel)[0]:
+            return None
+        miss = self.noise.miss_rate + (self.noise.miss_rate_at_max_range - self.noise.miss_rate) * depth / cam.max_range
+        if rng.random() < miss:
+            return None
+        surface = self._to_camera(pose, self._measured_centre(index, centre, pose)[None])
+        pixel, disparity = self.camera.project(surface)
+        pixel = pixel + rng.normal(0.0, self.noise.pixel_sigma, 2)
+        disparity = disparity + rng.normal(0.0, self.noise.disparity_sigma)
+        if disparity[0] < MIN_DISPARITY:
+            return None
+        corners = centre + (BOX_CORNERS * self.world.sizes[index]) @ _yaw_matrix(self.world.yaws[index]).T
+        box = self.camera.box(self._to_camera(pose, corners)) + rng.normal(0.0, self.noise.box_sigma, 4)
+        return SimulatedDetection(
+            label=self._label(str(self.world.labels[index]), rng),
+            score=self._score(depth, rng),
+            box_left=box,
+            box_right=box - np.array([disparity[0], 0.0, disparity[0], 0.0]),
+            center_camera=self.camera.back_project(pixel, disparity)[0],
+            patch=self._patch(self.world.textures[index], rng),
+            object_id=int(index),
+        )
+
+    def _label(self, label: str, rng: np.random.Generator) -> str:
+        if rng.random() < self.noise.label_confusion:
+            others = [other for other in self.labels if other != label]
+            return others[int(rng.integers(len(others)))]
+        return label
+
+    def _score(self, depth: float, rng: np.random.Generator) -> float:
+        mean = SCORE_NEAR + (SCORE_FAR - SCORE_NEAR) * depth / self.camera.config.max_range
+        return float(np.clip(mean + rng.normal(0.0, SCORE_SIGMA), *SCORE_RANGE))
+
+    def _patch(self, texture: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        gain = 1.0 + rng.normal(0.0, self.noise.patch_gain_sigma)
+        noisy = texture * gain + rng.normal(0.0, self.noise.patch_noise, texture.shape)
+        return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
+
+    def _false_positives(self, rng: np.random.Generator) -> list[SimulatedDetection]:
+        cam = self.camera.config
+        size = self.noise.patch_size
+        spurious = []
+        for _ in range(rng.poisson(self.noise.false_positives_per_frame)):
+            side = rng.uniform(*FALSE_POSITIVE_BOX_PX)
+            x1, y1 = rng.uniform(0, cam.width - side), rng.uniform(0, cam.height - side)
+            depth = rng.uniform(cam.min_range * 3, cam.max_range)
+            disparity = cam.fx * cam.baseline / depth
+            box = np.array([x1, y1, x1 + side, y1 + side])
+            centre = self.camera.back_project(np.array([[x1 + side / 2, y1 + side / 2]]), np.array([disparity]))[0]
+            texture = 120.0 + 60.0 * rng.standard_normal((size, size))
+            spurious.append(
+                SimulatedDetection(
+                    label=self.labels[int(rng.integers(len(self.labels)))],
+                    score=float(rng.uniform(*FALSE_POSITIVE_SCORE)),
+                    box_left=box,
+                    box_right=box - np.array([disparity, 0.0, disparity, 0.0]),
+                    center_camera=centre,
+                    patch=np.clip(np.rint(texture), 0, 255).astype(np.uint8),
+                    object_id=FALSE_POSITIVE,
+                )
+            )
+        return spurious

@@ -1,0 +1,179 @@
+"""A world of objects placed along a route the way a street holds them: parked cars on both sides, some trucks,
+bicycles and people at the kerb, optionally a share that moves along the road."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import gaussian_filter
+from scipy.spatial import cKDTree
+
+from neoslam.config import DetectionNoiseConfig, WorldConfig
+from neoslam.sim.routes import RepeatedLayout
+from neoslam.types import Trajectory
+
+__all__ = ["CLASS_SIZES", "World", "build_world"]
+
+# Length, width, height of each class, metres (typical street objects).
+CLASS_SIZES: dict[str, tuple[float, float, float]] = {
+    "car": (4.3, 1.8, 1.5),
+    "truck": (8.0, 2.5, 3.2),
+    "bicycle": (1.8, 0.6, 1.1),
+    "person": (0.6, 0.6, 1.75),
+}
+KERB_EXTRA = {"car": 0.0, "truck": 0.3, "bicycle": 1.5, "person": 2.0}  # m further out than parked cars
+ROAD_CLEARANCE = 3.0  # m: nothing is placed closer than this to any part of the route
+CENTRE_LINE_STEP = 0.5  # m
+TEXTURE_SMOOTHING = 1.5  # px, σ of the blur that gives textures structure
+TEXTURE_CONTRAST = 60.0  # grey levels, std of a texture around its mean
+TEXTURE_MEAN = 120.0  # grey level
+
+
+@dataclass(frozen=True)
+class World:
+    """Objects as arrays (one row each); positions are centres in the world frame at time 0."""
+
+    labels: np.ndarray  # (n,) str
+    positions: np.ndarray  # (n, 3)
+    sizes: np.ndarray  # (n, 3) length, width, height
+    yaws: np.ndarray  # (n,) heading of the object's length axis
+    velocities: np.ndarray  # (n, 3) m/s, zero for static objects
+    textures: np.ndarray  # (n, s, s) float grey levels
+
+    def __len__(self) -> int:
+        return len(self.labels)
+
+    def positions_at(self, time: float) -> np.ndarray:
+        return self.positions + self.velocities * time
+
+
+@dataclass(frozen=True)
+class _CentreLine:
+    xy: np.ndarray  # (n, 2)
+    ground: np.ndarray  # (n,) road height
+    heading: np.ndarray  # (n,)
+    revisited: np.ndarray  # (n,) bool: an earlier pass already placed objects here
+
+
+def _centre_line(trajectory: Trajectory, camera_height: float, revisit_radius: float) -> _CentreLine:
+    positions = trajectory.positions
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(positions, axis=0), axis=1))])
+    keep = np.concatenate([[True], np.diff(arc) > 1e-6])
+    positions, arc = positions[keep], arc[keep]
+    samples = np.arange(0.0, arc[-1], CENTRE_LINE_STEP)
+    dense = np.stack([np.interp(samples, arc, positions[:, k]) for k in range(3)], axis=1)
+    heading = np.unwrap(np.arctan2(*np.gradient(dense[:, :2], axis=0).T[::-1]))
+    tree = cKDTree(dense[:, :2])
+    gap = int(3 * revisit_radius / CENTRE_LINE_STEP)  # neighbours within this many samples are the same pass
+    revisited = np.array(
+        [any(j < i - gap for j in tree.query_ball_point(dense[i, :2], revisit_radius)) for i in range(len(dense))],
+        dtype=bool,
+    )
+    return _CentreLine(dense[:, :2], dense[:, 2] - camera_height, heading, revisited)
+
+
+def _class_textures(labels: list[str], size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    return {label: gaussian_filter(rng.normal(size=(size, size)), TEXTURE_SMOOTHING) for label in labels}
+
+
+def _texture(prototype: np.ndarray, individuality: float, rng: np.random.Generator) -> np.ndarray:
+    """Class prototype blended with an individual pattern, so that objects of a class look alike."""
+    own = gaussian_filter(rng.normal(size=prototype.shape), TEXTURE_SMOOTHING)
+    mixed = (1 - individuality) * prototype / prototype.std() + individuality * own / own.std()
+    return TEXTURE_MEAN + TEXTURE_CONTRAST * mixed / mixed.std()
+
+
+def _slots(line: _CentreLine, config: WorldConfig, rng: np.random.Generator) -> list[tuple[int, float]]:
+    """(centre-line sample, signed lateral side) of every slot that holds an object."""
+    spacing = int(config.spacing / CENTRE_LINE_STEP)
+    slots = []
+    for index in range(0, len(line.xy), spacing):
+        jittered = min(index + int(rng.integers(0, max(spacing // 2, 1))), len(line.xy) - 1)
+        for side in (1.0, -1.0):
+            if rng.random() < config.occupancy and not line.revisited[jittered]:
+                slots.append((jittered, side))
+    return slots
+
+
+def _place(line: _CentreLine, config: WorldConfig, patch: int, individuality: float, rng: np.random.Generator):
+    classes = sorted(config.class_mix)
+    weights = np.array([config.class_mix[c] for c in classes], dtype=float)
+    prototypes = _class_textures(classes, patch, rng)
+    road = cKDTree(line.xy)
+    placed: list[dict] = []
+    for index, side in _slots(line, config, rng):
+        label = classes[int(rng.choice(len(classes), p=weights / weights.sum()))]
+        heading = line.heading[index]
+        normal = np.array([-np.sin(heading), np.cos(heading)])
+        lateral = config.lateral_offset + KERB_EXTRA[label] + rng.normal(0.0, config.lateral_jitter)
+        xy = line.xy[index] + side * lateral * normal
+        if road.query_ball_point(xy, ROAD_CLEARANCE):  # on another street (near a crossing)
+            continue
+        if any(np.linalg.norm(xy - p["xy"]) < config.min_separation for p in placed[-40:]):
+            continue
+        size = CLASS_SIZES[label]
+        placed.append(
+            {
+                "label": label,
+                "xy": xy,
+                "z": line.ground[index] + size[2] / 2,
+                "yaw": heading + rng.normal(0.0, 0.05),
+                "texture": _texture(prototypes[label], individuality, rng),
+            }
+        )
+    return placed, prototypes
+
+
+def _repeat_layout(
+    placed: list[dict], repeat: RepeatedLayout, line: _CentreLine, prototypes, individuality, rng
+) -> list[dict]:
+    """Remove what stands at the target stretch and copy the source stretch's layout there (fresh textures)."""
+
+    def local(xy: np.ndarray, start, heading) -> np.ndarray:
+        c, s = np.cos(heading), np.sin(heading)
+        d = xy - np.asarray(start)
+        return np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1]])
+
+    def inside(xy, start, heading) -> bool:
+        along, across = local(xy, start, heading)
+        return 0.0 <= along < repeat.length and abs(across) < 2 * ROAD_CLEARANCE + 6.0
+
+    kept = [p for p in placed if not inside(p["xy"], repeat.target_start, repeat.target_heading)]
+    turn = repeat.target_heading - repeat.source_heading
+    rotation = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+    for p in placed:
+        if inside(p["xy"], repeat.source_start, repeat.source_heading):
+            xy = rotation @ (p["xy"] - np.asarray(repeat.source_start)) + np.asarray(repeat.target_start)
+            texture = _texture(prototypes[p["label"]], individuality, rng)
+            ground = line.ground[int(np.argmin(np.linalg.norm(line.xy - xy, axis=1)))]
+            z = ground + CLASS_SIZES[p["label"]][2] / 2
+            kept.append(dict(p, xy=xy, z=z, yaw=p["yaw"] + turn, texture=texture))
+    return kept
+
+
+def build_world(
+    trajectory: Trajectory,
+    config: WorldConfig,
+    detection: DetectionNoiseConfig,
+    camera_height: float,
+    rng: np.random.Generator,
+    repeats: tuple[RepeatedLayout, ...] = (),
+) -> World:
+    """Objects along the true trajectory, standing on the road surface below the camera."""
+    line = _centre_line(trajectory, camera_height, config.revisit_radius)
+    placed, prototypes = _place(line, config, detection.patch_size, detection.texture_individuality, rng)
+    for repeat in repeats:
+        placed = _repeat_layout(placed, repeat, line, prototypes, detection.texture_individuality, rng)
+    labels = np.array([p["label"] for p in placed])
+    xy = np.array([p["xy"] for p in placed]).reshape(-1, 2)
+    sizes = np.array([CLASS_SIZES[label] for label in labels]).reshape(-1, 3)
+    z = np.array([p["z"] for p in placed])
+    yaws = np.array([p["yaw"] for p in placed])
+    velocities = np.zeros((len(placed), 3))
+    moving = rng.random(len(placed)) < config.moving_fraction
+    direction = rng.choice([-1.0, 1.0], size=len(placed))
+    velocities[moving, 0] = direction[moving] * config.moving_speed * np.cos(yaws[moving])
+    velocities[moving, 1] = direction[moving] * config.moving_speed * np.sin(yaws[moving])
+    textures = np.array([p["texture"] for p in placed]).reshape(-1, detection.patch_size, detection.patch_size)
+    return World(labels, np.column_stack([xy, z]), sizes, yaws, velocities, textures)

@@ -1,0 +1,70 @@
+"""The paper's figures as PNG files: maps of ground truth, odometry and the corrected map in 2-D and 3-D
+(Fig. 3d, 3b) and the error of the maps along the route (Fig. 4b)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # headless: files only
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from neoslam.mapping.object_map import MapObject  # noqa: E402
+from neoslam.types import Trajectory  # noqa: E402
+
+__all__ = ["plot_map_2d", "plot_map_3d", "plot_error_along_route"]
+
+DPI = 120
+STYLES = {
+    "ground truth": {"color": "black", "linewidth": 1.6},
+    "odometry": {"color": "tab:red", "linewidth": 1.0, "linestyle": "--", "zorder": 3},  # visible on top
+    "corrected": {"color": "tab:blue", "linewidth": 1.2},
+}
+LABEL_COLOURS = {"car": "tab:blue", "truck": "tab:purple", "bicycle": "tab:green", "person": "tab:orange"}
+
+
+def _save(figure, path: Path) -> None:
+    figure.tight_layout()
+    figure.savefig(path, dpi=DPI)
+    plt.close(figure)
+
+
+def plot_map_2d(path: Path, trajectories: dict[str, Trajectory], objects: list[MapObject] | None = None) -> None:
+    """Top view of each trajectory (already in the frame to show) and the object map (Fig. 3d)."""
+    figure, axes = plt.subplots(figsize=(8, 7))
+    for o in objects or []:
+        axes.plot(*o.position[:2], ".", markersize=3, color=LABEL_COLOURS.get(o.label, "grey"), alpha=0.6)
+    for name, trajectory in trajectories.items():
+        axes.plot(*trajectory.positions[:, :2].T, label=name, **STYLES.get(name, {}))
+    axes.plot(*next(iter(trajectories.values())).positions[0, :2], "k^", markersize=8, label="start")
+    axes.set(xlabel="x [m]", ylabel="y [m]", title="Object experience map, top view")
+    axes.set_aspect("equal", adjustable="datalim")
+    axes.grid(alpha=0.3)
+    axes.legend(loc="best", fontsize=8)
+    _save(figure, path)
+
+
+def plot_map_3d(path: Path, trajectories: dict[str, Trajectory]) -> None:
+    """The trajectories in 3-D, height exaggerated so that slopes show (Fig. 3b)."""
+    figure = plt.figure(figsize=(8, 6))
+    axes = figure.add_subplot(projection="3d")
+    for name, trajectory in trajectories.items():
+        axes.plot(*trajectory.positions.T, label=name, **STYLES.get(name, {}))
+    axes.set(xlabel="x [m]", ylabel="y [m]", zlabel="z [m]", title="Object experience map in 3-D")
+    axes.legend(loc="best", fontsize=8)
+    _save(figure, path)
+
+
+def plot_error_along_route(path: Path, truth: Trajectory, estimates: dict[str, Trajectory]) -> None:
+    """Position error of each (aligned) estimate against the distance travelled (Fig. 4b)."""
+    travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(truth.positions, axis=0), axis=1))])
+    figure, axes = plt.subplots(figsize=(8, 4))
+    for name, estimate in estimates.items():
+        error = np.linalg.norm(estimate.positions - truth.positions, axis=1)
+        axes.plot(travelled, error, label=f"{name} (RMSE {np.sqrt(np.mean(error**2)):.2f} m)", **STYLES.get(name, {}))
+    axes.set(xlabel="distance travelled [m]", ylabel="position error [m]", title="Error of the maps along the route")
+    axes.grid(alpha=0.3)
+    axes.legend(loc="best", fontsize=8)
+    _save(figure, path)
