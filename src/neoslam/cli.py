@@ -10,7 +10,7 @@ import typer
 
 from neoslam import __version__
 from neoslam.config import NOISE_PROFILES, dump_config, load_config
-from neoslam.errors import NeoSLAMError
+from neoslam.errors import ConfigError, NeoSLAMError
 
 app = typer.Typer(
     name="neoslam",
@@ -67,12 +67,14 @@ def simulate(
     quiet: QuietOption = False,
 ) -> None:
     """Turn a trajectory into what a stereo camera with a detector and visual odometry would record there."""
+    from neoslam.io.atomic import check_target
     from neoslam.jobs import record, simulate_dataset, simulation_config
 
     try:
         if trajectory is not None and route is not None:
-            raise typer.BadParameter("give either --trajectory or --route, not both")
+            raise ConfigError("give either --trajectory or --route, not both")
         settings = simulation_config(load_config(config), noise, seed)
+        check_target(out, overwrite)
         recording = record(settings, trajectory, fmt, times, route, progress=not quiet)
         simulate_dataset(out, recording, overwrite)
     except (NeoSLAMError, OSError) as error:
@@ -123,7 +125,7 @@ def evaluate(
         settings = load_config(config)
         if align is not None:
             if align not in ("se3", "sim3", "none"):
-                raise typer.BadParameter(f"--align must be se3, sim3 or none, not {align!r}")
+                raise ConfigError(f"--align must be se3, sim3 or none, not {align!r}")
             evaluation = settings.evaluation.model_copy(update={"alignment": align})
             settings = settings.model_copy(update={"evaluation": evaluation})
         metrics = evaluate_files(estimate, groundtruth, settings, est_format, gt_format, loops)

@@ -152,6 +152,15 @@ class GridCellConfig(_Section):
     packet_size: int = Field(4, ge=0, description="decode window = peak ± packet_size cells")
     metres_per_cell: float = Field(2.0, gt=0, description="horizontal metres of motion per cell")
     metres_per_cell_vertical: float = Field(1.0, gt=0, description="vertical metres of motion per cell")
+    shift_kernel: Literal["zero-skew", "linear"] = Field(
+        "zero-skew",
+        description="sub-cell path-integration shift: 3-tap zero-skew blend, or NeuroSLAM's 2-tap linear one "
+        "(under-integrates slow motion by up to 10 %)",
+    )
+    settle_in_packet_frame: bool = Field(
+        True, description="settle with the packet moved onto its nearest cell: no lattice pinning (NeuroSLAM: no)"
+    )
+    dtype: Literal["float32", "float64"] = Field("float32", description="activity precision (float32: faster)")
 
 
 class HeadDirectionConfig(_Section):
@@ -165,6 +174,14 @@ class HeadDirectionConfig(_Section):
     global_inhibition: float = Field(2e-4, ge=0, description="subtracted from every cell each step")
     injection_energy: float = Field(0.1, ge=0, description="energy added at a recalled cell state")
     packet_size: int = Field(5, ge=0, description="decode window = peak ± packet_size cells")
+    shift_kernel: Literal["zero-skew", "linear"] = Field(
+        "zero-skew",
+        description="sub-cell path-integration shift: 3-tap zero-skew blend, or NeuroSLAM's 2-tap linear one",
+    )
+    settle_in_packet_frame: bool = Field(
+        True, description="settle with the packet moved onto its nearest cell: no lattice pinning (NeuroSLAM: no)"
+    )
+    dtype: Literal["float32", "float64"] = Field("float32", description="activity precision (float32: faster)")
 
 
 class ObjectVectorConfig(_Section):
@@ -172,13 +189,23 @@ class ObjectVectorConfig(_Section):
 
     peak_rate: float = Field(1.2, description="a of eq. 7, Hz")
     baseline_rate: float = Field(0.0, description="b of eq. 7, Hz")
-    field_sigma: float = Field(5.0, gt=0, description="σ of eq. 10, m")
+    field_sigma: float = Field(5.0, gt=0, description="σ of eq. 10 along the preferred direction, m")
+    field_sigma_across: float | None = Field(
+        None, gt=0, description="σ across the preferred direction, m (elliptical field); None: equal, as eq. 10"
+    )
     preferred_distance: float = Field(10.0, ge=0, description="distance of the field's centre, m")
+    preferred_direction: float = Field(0.0, description="allocentric direction of the field's centre, rad (φ, eq. 9)")
+    distance_scale: float = Field(40.0, gt=0, description="inputs d are divided by this, m (camera max range)")
+    direction_encoding: Literal["cos_sin", "raw", "cartesian"] = Field(
+        "cos_sin", description="φ as (cos φ, sin φ), continuous across ±π, or raw radians"
+    )
     hidden_units: int = Field(32, gt=0, description="N hidden ELU units (eq. 12)")
+    optimizer: Literal["adam", "sgd"] = Field("adam", description="plain SGD at lr 0.001 hardly learns in 10 epochs")
     learning_rate: float = Field(0.001, gt=0, description="paper: 0.001")
+    batch_size: int = Field(1, gt=0, description="object vectors per gradient step")
     epochs: int = Field(10, gt=0, description="paper: 10")
     keyframes_per_epoch: int = Field(20, gt=0, description="paper: 20")
-    seed: int = Field(0, description="weight initialisation and sampling seed")
+    seed: int = Field(0, description="weight initialisation and shuffling seed")
 
 
 class HebbianConfig(_Section):
@@ -261,8 +288,17 @@ def _env_overrides(environ: dict[str, str]) -> dict[str, Any]:
         node = overrides
         for part in path[:-1]:
             node = node.setdefault(part, {})
-        node[path[-1]] = yaml.safe_load(raw) if raw.strip() else raw
+        node[path[-1]] = _parse_scalar(raw)
     return overrides
+
+
+def _parse_scalar(raw: str) -> Any:
+    """A YAML scalar or list ("0.3", "true", "[36, 36, 36]"); text that is not YAML stays a string, so that
+    validation names the field instead of the YAML parser failing."""
+    try:
+        return yaml.safe_load(raw) if raw.strip() else raw
+    except yaml.YAMLError:
+        return raw
 
 
 def _merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
@@ -296,10 +332,15 @@ def load_config(path: Path | None = None, environ: dict[str, str] | None = None)
         values = loaded
     env = _env_overrides(dict(os.environ if environ is None else environ))
     try:
+        NeoSLAMConfig.model_validate(values)
+    except ValidationError as error:
+        raise ConfigError(f"{path or 'configuration'}: {_describe(error)}") from None
+    try:
         return NeoSLAMConfig.model_validate(_merge(values, env))
     except ValidationError as error:
-        source = str(path) if path is not None else "configuration"
-        raise ConfigError(f"{source}: {_describe(error)} (after NEOSLAM_* overrides)") from None
+        first = error.errors()[0]["loc"]
+        variable = ENV_PREFIX + ENV_NESTED_DELIMITER.join(str(part) for part in first).upper()
+        raise ConfigError(f"environment variable {variable}: {_describe(error)}") from None
 
 
 def dump_config(config: NeoSLAMConfig) -> str:

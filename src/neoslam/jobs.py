@@ -31,6 +31,7 @@ from neoslam.viz.plots import plot_error_along_route, plot_map_2d, plot_map_3d
 __all__ = ["DEFAULT_ROUTE", "simulation_config", "record", "simulate_dataset", "run_dataset", "evaluate_files"]
 
 DEFAULT_ROUTE = "town"
+MIN_ALIGNMENT_POSES = 3  # Umeyama needs three points
 
 
 def simulation_config(config: NeoSLAMConfig, noise: str | None, seed: int | None) -> NeoSLAMConfig:
@@ -98,7 +99,7 @@ def _metrics(dataset: SimulatedDataset, result: RunResult, config: NeoSLAMConfig
 def _plots(folder: Path, result: RunResult, truth: Trajectory | None) -> None:
     folder.mkdir()
     estimates = {"odometry": result.odometry, "corrected": result.estimate}
-    if truth is None:
+    if truth is None or len(truth) < MIN_ALIGNMENT_POSES:
         plot_map_2d(folder / "map_2d.png", estimates, result.objects)
         plot_map_3d(folder / "map_3d.png", estimates)
         return

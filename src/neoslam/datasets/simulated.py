@@ -201,4 +201,6 @@ def read_dataset(folder: Path) -> SimulatedDataset:
     truth = read_tum(truth_file) if truth_file.is_file() else None
     if truth is not None and len(truth) != len(stamps):
         raise InputError(truth_file, f"{len(truth)} poses for {len(stamps)} frames")
-    return SimulatedDataset(folder, str(meta["name"]), meta["camera"], stamps, linear, angular, observations, truth)
+    return SimulatedDataset(
+        folder, str(meta.get("name", folder.name)), meta["camera"], stamps, linear, angular, observations, truth
+    )

@@ -9,7 +9,12 @@ import numpy as np
 
 from neoslam.config import EvaluationConfig
 from neoslam.evaluation.loops import LoopCriteria, evaluate_closures
-from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error, kitti_drift, relative_pose_error
+from neoslam.evaluation.trajectory_metrics import (
+    ErrorStats,
+    absolute_trajectory_error,
+    kitti_drift,
+    relative_pose_error,
+)
 from neoslam.types import LoopClosure, Trajectory
 
 __all__ = ["trajectory_metrics", "loop_metrics", "timing_metrics"]
@@ -20,18 +25,34 @@ def _finite(value: float) -> float | None:
 
 
 def trajectory_metrics(estimate: Trajectory, truth: Trajectory, config: EvaluationConfig) -> dict[str, Any]:
-    """ATE (aligned as configured), RPE and KITTI drift of one estimate whose poses match truth frame by frame."""
-    ate = absolute_trajectory_error(estimate, truth, align=config.alignment)
-    rpe = relative_pose_error(estimate, truth, delta=config.rpe_delta, unit=config.rpe_unit)
+    """ATE (aligned as configured), RPE and KITTI drift of one estimate whose poses match truth frame by frame.
+
+    A metric the data cannot support (alignment of fewer than 3 poses, a route shorter than the RPE delta, or than
+    KITTI's shortest segment) is None rather than an error: a short run is not a user's mistake.
+    """
+    nan_stats = ErrorStats.from_errors(np.empty(0))
+    try:
+        ate = absolute_trajectory_error(estimate, truth, align=config.alignment)
+    except ValueError:
+        ate = nan_stats
+    try:
+        rpe_translation, rpe_rotation = _rpe(estimate, truth, config)
+    except ValueError:
+        rpe_translation = rpe_rotation = nan_stats
     drift = kitti_drift(estimate, truth)
     return {
         "ate_rmse_m": _finite(ate.rmse),
         "ate_max_m": _finite(ate.max),
-        "rpe_translation_rmse_m": _finite(rpe.translation.rmse),
-        "rpe_rotation_rmse_deg": _finite(rpe.rotation.rmse),
+        "rpe_translation_rmse_m": _finite(rpe_translation.rmse),
+        "rpe_rotation_rmse_deg": _finite(rpe_rotation.rmse),
         "kitti_translation_percent": _finite(drift.translation_percent),
         "kitti_rotation_deg_per_100m": _finite(drift.rotation_deg_per_100m),
     }
+
+
+def _rpe(estimate: Trajectory, truth: Trajectory, config: EvaluationConfig) -> tuple[ErrorStats, ErrorStats]:
+    rpe = relative_pose_error(estimate, truth, delta=config.rpe_delta, unit=config.rpe_unit)
+    return rpe.translation, rpe.rotation
 
 
 def loop_metrics(closures: list[LoopClosure], truth: Trajectory | None, config: EvaluationConfig) -> dict[str, Any]:

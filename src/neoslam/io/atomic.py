@@ -10,7 +10,15 @@ from pathlib import Path
 
 from neoslam.errors import OutputError
 
-__all__ = ["atomic_directory"]
+__all__ = ["check_target", "atomic_directory"]
+
+
+def check_target(target: Path, overwrite: bool = False) -> None:
+    """Refuse a target that is a file, or a non-empty folder without `overwrite` (before any long work)."""
+    if target.exists() and not target.is_dir():
+        raise OutputError(f"{target}: exists and is not a folder")
+    if target.is_dir() and any(target.iterdir()) and not overwrite:
+        raise OutputError(f"{target}: folder exists and is not empty (pass --overwrite to replace it)")
 
 
 @contextmanager
@@ -19,10 +27,7 @@ def atomic_directory(target: Path, overwrite: bool = False) -> Iterator[Path]:
 
     An existing non-empty `target` is refused unless `overwrite`.
     """
-    if target.exists() and not target.is_dir():
-        raise OutputError(f"{target}: exists and is not a folder")
-    if target.is_dir() and any(target.iterdir()) and not overwrite:
-        raise OutputError(f"{target}: folder exists and is not empty (pass --overwrite to replace it)")
+    check_target(target, overwrite)
     target.parent.mkdir(parents=True, exist_ok=True)
     staging = target.parent / f".{target.name}.partial-{os.getpid()}"
     shutil.rmtree(staging, ignore_errors=True)

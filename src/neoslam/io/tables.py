@@ -18,8 +18,11 @@ def read_table(path: Path, columns: Sequence[str]) -> list[list[str]]:
     """Rows (lists of strings) of a CSV file whose header is exactly `columns`."""
     if not path.is_file():
         raise InputError(path, "file not found")
-    with path.open(newline="") as handle:
-        rows = list(csv.reader(handle))
+    try:
+        with path.open(newline="", encoding="utf-8") as handle:
+            rows = [row for row in csv.reader(handle) if row]  # blank lines carry nothing
+    except UnicodeDecodeError:
+        raise InputError(path, "not a text file (not UTF-8)") from None
     if not rows:
         raise InputError(path, f"empty file: expected the header {','.join(columns)}", line=1)
     if [name.strip() for name in rows[0]] != list(columns):

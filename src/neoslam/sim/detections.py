@@ -54,7 +54,10 @@ class DetectionSimulator:
         self._tree = cKDTree(world.positions[static, :2]) if static.any() else None
 
     def _nearby(self, pose: np.ndarray, positions: np.ndarray) -> np.ndarray:
-        reach = self.camera.config.max_range + max(self.world.sizes.max(initial=0.0), 0.0)
+        cam = self.camera.config
+        # The farthest point in view: max_range deep at the image's wider edge.
+        half_width = max(cam.cx, cam.width - cam.cx) / cam.fx * cam.max_range
+        reach = float(np.hypot(cam.max_range, half_width)) + self.world.sizes.max(initial=0.0)
         ids = []
         if self._tree is not None:
             ids = self._static_ids[self._tree.query_ball_point(pose[:2, 3], reach)].tolist()

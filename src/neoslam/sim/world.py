@@ -25,6 +25,7 @@ CLASS_SIZES: dict[str, tuple[float, float, float]] = {
 KERB_EXTRA = {"car": 0.0, "truck": 0.3, "bicycle": 1.5, "person": 2.0}  # m further out than parked cars
 ROAD_CLEARANCE = 3.0  # m: nothing is placed closer than this to any part of the route
 CENTRE_LINE_STEP = 0.5  # m
+MIN_CENTRE_LINE_SAMPLES = 3  # a shorter route (under about a metre) gets no objects
 TEXTURE_SMOOTHING = 1.5  # px, σ of the blur that gives textures structure
 TEXTURE_CONTRAST = 60.0  # grey levels, std of a texture around its mean
 TEXTURE_MEAN = 120.0  # grey level
@@ -56,12 +57,14 @@ class _CentreLine:
     revisited: np.ndarray  # (n,) bool: an earlier pass already placed objects here
 
 
-def _centre_line(trajectory: Trajectory, camera_height: float, revisit_radius: float) -> _CentreLine:
+def _centre_line(trajectory: Trajectory, camera_height: float, revisit_radius: float) -> _CentreLine | None:
     positions = trajectory.positions
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(positions, axis=0), axis=1))])
     keep = np.concatenate([[True], np.diff(arc) > 1e-6])
     positions, arc = positions[keep], arc[keep]
     samples = np.arange(0.0, arc[-1], CENTRE_LINE_STEP)
+    if len(samples) < MIN_CENTRE_LINE_SAMPLES:  # the robot hardly moves: there is no street to line
+        return None
     dense = np.stack([np.interp(samples, arc, positions[:, k]) for k in range(3)], axis=1)
     heading = np.unwrap(np.arctan2(*np.gradient(dense[:, :2], axis=0).T[::-1]))
     tree = cKDTree(dense[:, :2])
@@ -110,7 +113,7 @@ def _place(line: _CentreLine, config: WorldConfig, patch: int, individuality: fl
         xy = line.xy[index] + side * lateral * normal
         if road.query_ball_point(xy, ROAD_CLEARANCE):  # on another street (near a crossing)
             continue
-        if any(np.linalg.norm(xy - p["xy"]) < config.min_separation for p in placed[-40:]):
+        if placed and np.linalg.norm(np.array([p["xy"] for p in placed]) - xy, axis=1).min() < config.min_separation:
             continue
         size = CLASS_SIZES[label]
         placed.append(
@@ -162,10 +165,16 @@ def build_world(
 ) -> World:
     """Objects along the true trajectory, standing on the road surface below the camera."""
     line = _centre_line(trajectory, camera_height, config.revisit_radius)
+    if line is None:
+        return _world_of([], detection.patch_size, config, rng)
     placed, prototypes = _place(line, config, detection.patch_size, detection.texture_individuality, rng)
     for repeat in repeats:
         placed = _repeat_layout(placed, repeat, line, prototypes, detection.texture_individuality, rng)
-    labels = np.array([p["label"] for p in placed])
+    return _world_of(placed, detection.patch_size, config, rng)
+
+
+def _world_of(placed: list[dict], patch_size: int, config: WorldConfig, rng: np.random.Generator) -> World:
+    labels = np.array([p["label"] for p in placed], dtype=str)
     xy = np.array([p["xy"] for p in placed]).reshape(-1, 2)
     sizes = np.array([CLASS_SIZES[label] for label in labels]).reshape(-1, 3)
     z = np.array([p["z"] for p in placed])
@@ -175,5 +184,5 @@ def build_world(
     direction = rng.choice([-1.0, 1.0], size=len(placed))
     velocities[moving, 0] = direction[moving] * config.moving_speed * np.cos(yaws[moving])
     velocities[moving, 1] = direction[moving] * config.moving_speed * np.sin(yaws[moving])
-    textures = np.array([p["texture"] for p in placed]).reshape(-1, detection.patch_size, detection.patch_size)
+    textures = np.array([p["texture"] for p in placed]).reshape(-1, patch_size, patch_size)
     return World(labels, np.column_stack([xy, z]), sizes, yaws, velocities, textures)

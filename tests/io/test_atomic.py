@@ -1,0 +1,81 @@
+"""Output folders appear whole or not at all."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from neoslam.errors import OutputError
+from neoslam.io.atomic import atomic_directory
+
+
+def _leftovers(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir() if "partial" in p.name)
+
+
+def test_writes_a_new_folder(tmp_path: Path) -> None:
+    target = tmp_path / "nested" / "out"
+    with atomic_directory(target) as staging:
+        assert staging != target
+        assert not target.exists()  # nothing visible until the body is done
+        (staging / "a.txt").write_text("a")
+    assert (target / "a.txt").read_text() == "a"
+    assert _leftovers(target.parent) == []
+
+
+def test_an_empty_existing_folder_is_used(tmp_path: Path) -> None:
+    target = tmp_path / "out"
+    target.mkdir()
+    with atomic_directory(target) as staging:
+        (staging / "a.txt").write_text("a")
+    assert sorted(p.name for p in target.iterdir()) == ["a.txt"]
+
+
+def test_refuses_a_non_empty_folder_without_overwrite(tmp_path: Path) -> None:
+    target = tmp_path / "out"
+    target.mkdir()
+    (target / "old.txt").write_text("old")
+    with pytest.raises(OutputError, match="not empty"), atomic_directory(target):
+        pytest.fail("the body must not run")
+    assert (target / "old.txt").read_text() == "old"
+    assert _leftovers(tmp_path) == []
+
+
+def test_overwrite_replaces_the_folder(tmp_path: Path) -> None:
+    target = tmp_path / "out"
+    target.mkdir()
+    (target / "old.txt").write_text("old")
+    with atomic_directory(target, overwrite=True) as staging:
+        (staging / "new.txt").write_text("new")
+        assert (target / "old.txt").exists()  # the old results stay until the new ones are complete
+    assert sorted(p.name for p in target.iterdir()) == ["new.txt"]
+    assert _leftovers(tmp_path) == []
+
+
+def test_refuses_a_file(tmp_path: Path) -> None:
+    target = tmp_path / "out"
+    target.write_text("x")
+    with pytest.raises(OutputError, match="not a folder"), atomic_directory(target, overwrite=True):
+        pass
+    assert target.read_text() == "x"
+
+
+def test_failure_leaves_nothing_behind(tmp_path: Path) -> None:
+    target = tmp_path / "out"
+    with pytest.raises(RuntimeError, match="boom"), atomic_directory(target) as staging:
+        (staging / "half.txt").write_text("half")
+        raise RuntimeError("boom")
+    assert not target.exists()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_failure_with_overwrite_keeps_the_old_folder(tmp_path: Path) -> None:
+    target = tmp_path / "out"
+    target.mkdir()
+    (target / "old.txt").write_text("old")
+    with pytest.raises(KeyboardInterrupt), atomic_directory(target, overwrite=True) as staging:
+        (staging / "half.txt").write_text("half")
+        raise KeyboardInterrupt
+    assert sorted(p.name for p in target.iterdir()) == ["old.txt"]
+    assert _leftovers(tmp_path) == []
