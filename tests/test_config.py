@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-import yaml
 
 from neoslam.config import NOISE_PROFILES, NeoSLAMConfig, OdometryNoiseConfig, dump_config, load_config
 from neoslam.errors import ConfigError, InputError, NeoSLAMError
