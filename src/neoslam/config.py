@@ -195,14 +195,16 @@ class ObjectVectorConfig(_Section):
     )
     preferred_distance: float = Field(10.0, ge=0, description="distance of the field's centre, m")
     preferred_direction: float = Field(0.0, description="allocentric direction of the field's centre, rad (φ, eq. 9)")
-    distance_scale: float = Field(40.0, gt=0, description="inputs d are divided by this, m (camera max range)")
-    direction_encoding: Literal["cos_sin", "raw", "cartesian"] = Field(
-        "cos_sin", description="φ as (cos φ, sin φ), continuous across ±π, or raw radians"
+    distance_scale: float = Field(
+        10.0, gt=0, description="inputs d are divided by this, m: about 2σ, so the field spans as much of d as of φ"
+    )
+    direction_encoding: Literal["cos_sin", "raw"] = Field(
+        "cos_sin", description="φ as (cos φ, sin φ), continuous across ±π (fits better), or raw radians / π"
     )
     hidden_units: int = Field(32, gt=0, description="N hidden ELU units (eq. 12)")
     optimizer: Literal["adam", "sgd"] = Field("adam", description="plain SGD at lr 0.001 hardly learns in 10 epochs")
     learning_rate: float = Field(0.001, gt=0, description="paper: 0.001")
-    batch_size: int = Field(1, gt=0, description="object vectors per gradient step")
+    batch_size: int = Field(1, gt=0, description="object vectors per update; 1: one per observation, as eq. 13")
     epochs: int = Field(10, gt=0, description="paper: 10")
     keyframes_per_epoch: int = Field(20, gt=0, description="paper: 20")
     seed: int = Field(0, description="weight initialisation and shuffling seed")
