@@ -22,6 +22,7 @@ __all__ = [
     "umeyama_alignment",
     "integrate_body_velocities",
     "body_velocities",
+    "planar_motion",
 ]
 
 
@@ -164,3 +165,12 @@ def body_velocities(poses: np.ndarray, timestamps: np.ndarray) -> tuple[np.ndarr
     linear[1:] = steps[:, :3, 3] / dt
     angular[1:] = Rotation.from_matrix(steps[:, :3, :3]).as_rotvec() / dt
     return linear, angular
+
+
+def planar_motion(previous: np.ndarray, current: np.ndarray) -> tuple[float, float, float]:
+    """The 4-DoF motion NeuroSLAM integrates between two poses T_world_robot: horizontal distance (m), yaw change
+    (rad, wrapped to [-pi, pi)) and vertical change (m)."""
+    step = current[:3, 3] - previous[:3, 3]
+    yaw_change = float(yaw_of(current) - yaw_of(previous))
+    yaw_change = (yaw_change + np.pi) % (2 * np.pi) - np.pi
+    return float(np.hypot(step[0], step[1])), yaw_change, float(step[2])

@@ -10,7 +10,7 @@ from typing import Any
 from neoslam.config import NOISE_PROFILES, NeoSLAMConfig
 from neoslam.datasets.simulated import SimulatedDataset, is_simulated_dataset, read_dataset, write_dataset
 from neoslam.errors import ConfigError, InputError
-from neoslam.evaluation.report import loop_metrics, timing_metrics, trajectory_metrics
+from neoslam.evaluation.report import cell_metrics, loop_metrics, timing_metrics, trajectory_metrics
 from neoslam.evaluation.trajectory_metrics import align, associate
 from neoslam.io.atomic import atomic_directory
 from neoslam.io.results import (
@@ -18,6 +18,7 @@ from neoslam.io.results import (
     write_config,
     write_loop_closures,
     write_metrics,
+    write_object_vector_cells,
     write_objects,
     write_trajectories,
 )
@@ -26,7 +27,7 @@ from neoslam.pipeline import RunResult, run
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.sim.simulator import SimulatedRecording, simulate
 from neoslam.types import Trajectory
-from neoslam.viz.plots import plot_error_along_route, plot_map_2d, plot_map_3d
+from neoslam.viz.plots import plot_error_along_route, plot_map_2d, plot_map_3d, plot_ovcn_loss
 
 __all__ = ["DEFAULT_ROUTE", "simulation_config", "record", "simulate_dataset", "run_dataset", "evaluate_files"]
 
@@ -92,12 +93,15 @@ def _metrics(dataset: SimulatedDataset, result: RunResult, config: NeoSLAMConfig
         metrics["trajectory"] = {"alignment": evaluation.alignment, "odometry": odometry, "corrected": corrected}
     metrics["loops"] = loop_metrics(result.loop_closures, truth, config.evaluation)
     metrics["objects"] = len(result.objects)
+    metrics["cells"] = cell_metrics(result.cell_states, result.odometry, result.object_vector_cells)
     metrics["timing"] = timing_metrics(result.frame_times_s, wall_s)
     return metrics
 
 
 def _plots(folder: Path, result: RunResult, truth: Trajectory | None) -> None:
     folder.mkdir()
+    if result.object_vector_cells.loss_history:
+        plot_ovcn_loss(folder / "ovcn_loss.png", result.object_vector_cells.loss_history)
     estimates = {"odometry": result.odometry, "corrected": result.estimate}
     if truth is None or len(truth) < MIN_ALIGNMENT_POSES:
         plot_map_2d(folder / "map_2d.png", estimates, result.objects)
@@ -130,6 +134,7 @@ def run_dataset(
         write_trajectories(staging, trajectories)
         write_loop_closures(staging / "loop_closures.csv", result.loop_closures)
         write_objects(staging / "objects.csv", result.objects)
+        write_object_vector_cells(staging, result.object_vector_cells)
         write_config(staging / "config.yaml", config)
         metrics = _metrics(dataset, result, config, wall_s)
         write_metrics(staging / "metrics.json", metrics)

@@ -15,9 +15,10 @@ from neoslam.evaluation.trajectory_metrics import (
     kitti_drift,
     relative_pose_error,
 )
+from neoslam.geometry import yaw_of
 from neoslam.types import LoopClosure, Trajectory
 
-__all__ = ["trajectory_metrics", "loop_metrics", "timing_metrics"]
+__all__ = ["trajectory_metrics", "loop_metrics", "cell_metrics", "timing_metrics"]
 
 
 def _finite(value: float) -> float | None:
@@ -62,6 +63,25 @@ def loop_metrics(closures: list[LoopClosure], truth: Trajectory | None, config: 
         return block
     criteria = LoopCriteria(config.loop_max_distance, config.loop_min_frame_gap)
     return block | evaluate_closures(closures, truth.positions, criteria).as_dict()
+
+
+def cell_metrics(cell_states: np.ndarray, odometry: Trajectory, object_vector_cells) -> dict[str, Any]:
+    """How far the decoded grid and head-direction cells are from the odometry they integrate, and how the OVCN
+    learned (no ground truth involved)."""
+    position_error = np.linalg.norm(cell_states[:, :3] - odometry.positions, axis=1)
+    heading_error = np.angle(np.exp(1j * (cell_states[:, 3] - yaw_of(odometry.poses))))
+    losses = object_vector_cells.loss_history
+    held_out = object_vector_cells.held_out_error()
+    return {
+        "grid_cells_vs_odometry_rms_m": _finite(np.sqrt(np.mean(position_error**2))),
+        "grid_cells_vs_odometry_final_m": _finite(position_error[-1]),
+        "head_direction_vs_odometry_rms_deg": _finite(np.degrees(np.sqrt(np.mean(heading_error**2)))),
+        "ovcn_epochs": len(losses),
+        "ovcn_loss_first": _finite(losses[0]) if losses else None,
+        "ovcn_loss_last": _finite(losses[-1]) if losses else None,
+        "ovcn_held_out_rmse_hz": _finite(held_out["rmse_hz"]),
+        "ovcn_held_out_max_hz": _finite(held_out["max_abs_hz"]),
+    }
 
 
 def timing_metrics(frame_times_s: np.ndarray, wall_s: float) -> dict[str, float]:

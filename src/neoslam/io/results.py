@@ -16,7 +16,7 @@ from neoslam.mapping.object_map import MapObject
 from neoslam.types import LoopClosure, Trajectory
 
 __all__ = ["LOOP_COLUMNS", "OBJECT_COLUMNS", "write_trajectories", "write_loop_closures", "write_objects",
-           "write_metrics", "write_config", "read_loop_closures"]  # fmt: skip
+           "write_metrics", "write_config", "read_loop_closures", "write_object_vector_cells"]  # fmt: skip
 
 LOOP_COLUMNS = (
     "query_frame", "match_frame", "query_keyframe", "match_keyframe", "score", "matched_objects",
@@ -47,6 +47,13 @@ def write_loop_closures(path: Path, closures: list[LoopClosure]) -> None:
 def write_objects(path: Path, objects: list[MapObject]) -> None:
     rows = [[o.id, o.label, *(f"{v:.4f}" for v in o.position), o.observations] for o in objects]
     write_table(path, OBJECT_COLUMNS, rows)
+
+
+def write_object_vector_cells(folder: Path, cells) -> None:
+    """The trained OVCN (ovcn.pt, loaded by ObjectVectorCells.load) and its loss per epoch (ovcn_loss.csv)."""
+    cells.save(folder / "ovcn.pt")
+    rows = [[epoch, f"{loss:.8f}"] for epoch, loss in enumerate(cells.loss_history, start=1)]
+    write_table(folder / "ovcn_loss.csv", ("epoch", "loss"), rows)
 
 
 def write_metrics(path: Path, metrics: dict[str, Any]) -> None:

@@ -1,5 +1,5 @@
 """The paper's figures as PNG files: maps of ground truth, odometry and the corrected map in 2-D and 3-D
-(Fig. 3d, 3b) and the error of the maps along the route (Fig. 4b)."""
+(Fig. 3d, 3b), the error of the maps along the route (Fig. 4b) and the OVCN's training loss (Fig. 4a)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import numpy as np  # noqa: E402
 from neoslam.mapping.object_map import MapObject  # noqa: E402
 from neoslam.types import Trajectory  # noqa: E402
 
-__all__ = ["plot_map_2d", "plot_map_3d", "plot_error_along_route"]
+__all__ = ["plot_map_2d", "plot_map_3d", "plot_error_along_route", "plot_ovcn_loss"]
 
 DPI = 120
 STYLES = {
@@ -67,4 +67,14 @@ def plot_error_along_route(path: Path, truth: Trajectory, estimates: dict[str, T
     axes.set(xlabel="distance travelled [m]", ylabel="position error [m]", title="Error of the maps along the route")
     axes.grid(alpha=0.3)
     axes.legend(loc="best", fontsize=8)
+    _save(figure, path)
+
+
+def plot_ovcn_loss(path: Path, losses: list[float]) -> None:
+    """Mean L2 loss (eq. 13) of the object-vector cells network per epoch (Fig. 4a)."""
+    figure, axes = plt.subplots(figsize=(6, 4))
+    axes.plot(np.arange(1, len(losses) + 1), losses, "o-", color="tab:blue")
+    axes.set(xlabel="epoch", ylabel="loss ½(y − O)²", title="Training of the object-vector cells network")
+    axes.set_yscale("log")
+    axes.grid(alpha=0.3, which="both")
     _save(figure, path)
