@@ -218,10 +218,29 @@ class HebbianConfig(_Section):
 
 
 class KeyframeConfig(_Section):
-    """Object keyframes (paper 3.2)."""
+    """Object keyframes (paper 3.2): the current object and the objects around it, in the world frame.
+
+    Observations are first fused over a short stretch of road (the local window), where odometry drift is small,
+    so that a keyframe's object centres average many stereo measurements.
+    """
 
     e_max: float = Field(1.5, gt=0, description="e_max of eq. 2, m (paper)")
-    neighbourhood_radius: float = Field(1.5, gt=0, description="objects this close to the current one join it, m")
+    neighbourhood_radius: float = Field(
+        30.0, gt=0, description="objects this close to the current object join its keyframe, m (paper: e_max)"
+    )
+    spacing: float = Field(5.0, gt=0, description="a keyframe every this many metres of travel")
+    min_objects: int = Field(4, gt=0, description="fewer objects in the neighbourhood make no keyframe")
+    window_length: float = Field(60.0, gt=0, description="observations fused over this much recent travel, m")
+    association_radius: float = Field(2.5, gt=0, description="an observation joins a window object this close, m")
+    min_observations: int = Field(3, gt=0, description="window objects seen fewer times are left out")
+    footprints: dict[str, tuple[float, float]] = Field(
+        default_factory=lambda: {"car": (4.3, 1.8), "truck": (8.0, 2.5), "bicycle": (1.8, 0.6), "person": (0.6, 0.6)},
+        description="typical length and width of each class, m, lying along the road: stereo points lie on the "
+        "visible surface, and the centre is half the footprint further along the viewing ray",
+    )
+    depth_sigma_at_1m: float = Field(
+        0.0015, gt=0, description="stereo depth std at 1 m, m; grows with depth^2 and weights the fusion"
+    )
 
 
 class MatchingConfig(_Section):
@@ -229,10 +248,33 @@ class MatchingConfig(_Section):
 
     appearance_rmse_threshold: float = Field(80.0, gt=0, description="max patch RMSE, 0-255 grey (paper)")
     score_threshold: float = Field(1.0, ge=0, description="a score above this is a loop-closure candidate (paper)")
-    min_inliers: int = Field(3, gt=0, description="matched objects needed to accept a closure")
-    max_fit_residual: float = Field(1.0, gt=0, description="max RMS residual of the rigid fit, m")
-    exclude_recent_keyframes: int = Field(50, ge=0, description="never match the most recent keyframes")
-    candidates: int = Field(5, gt=0, description="best retrieval candidates that are matched in full")
+    min_support: int = Field(2, ge=0, description="a match needs this many other matches with consistent e_ij")
+    min_inliers: int = Field(4, gt=0, description="verified matched objects needed to accept a closure")
+    min_inlier_ratio: float = Field(
+        0.7, ge=0, le=1, description="and this share of the smaller keyframe's objects (a place, not a pattern)"
+    )
+    max_fit_residual: float = Field(0.6, gt=0, description="max RMS residual of the rigid fit, m (ground plane)")
+    inlier_distance: float = Field(1.5, gt=0, description="a match fits the rigid transform within this, m")
+    max_place_offset: float = Field(
+        4.0, gt=0, description="accept only if the fit puts the two robot poses this close, m (same place)"
+    )
+    max_vertical_offset: float = Field(
+        6.0,
+        gt=0,
+        description="reject if the fit puts the two robot poses this far apart in height, m: a bridge "
+        "over a street is another place (KITTI 02 and 08 ground truth disagree by up to 5.8 m at one place)",
+    )
+    exclude_recent_distance: float = Field(60.0, ge=0, description="never match keyframes from the last metres")
+    search_radius: float = Field(15.0, gt=0, description="candidates lie this close to the estimated position, m")
+    search_radius_per_metre: float = Field(
+        0.1, ge=0, description="plus this share of the distance travelled since the candidate (odometry drift)"
+    )
+    candidates: int = Field(10, gt=0, description="best retrieval candidates that are matched in full")
+    consecutive: int = Field(
+        2, gt=0, description="accept only when this many consecutive keyframes relocalise consistently"
+    )
+    consistent_distance: float = Field(2.0, gt=0, description="consecutive relocalisations agree within this, m")
+    consistent_yaw_deg: float = Field(5.0, gt=0, description="and within this yaw, degrees")
 
 
 class ExperienceMapConfig(_Section):
@@ -259,6 +301,11 @@ class EvaluationConfig(_Section):
 
     loop_max_distance: float = Field(5.0, gt=0, description="a true closure's frames are this close, m")
     loop_min_frame_gap: int = Field(100, ge=0, description="and at least this many frames apart")
+    loop_distance: Literal["3d", "horizontal"] = Field(
+        "horizontal",
+        description="distance of that test: horizontal, since KITTI 02 and 08 ground truth disagree by up to 5.8 m "
+        "in height where a road is driven again; or 3d",
+    )
     alignment: Literal["se3", "sim3", "none"] = Field("se3", description="alignment before ATE")
     rpe_delta: float = Field(100.0, gt=0, description="RPE pair spacing")
     rpe_unit: Literal["frames", "m"] = Field("m", description="unit of rpe_delta")

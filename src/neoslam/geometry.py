@@ -23,6 +23,7 @@ __all__ = [
     "integrate_body_velocities",
     "body_velocities",
     "planar_motion",
+    "fit_yaw_translation",
 ]
 
 
@@ -174,3 +175,18 @@ def planar_motion(previous: np.ndarray, current: np.ndarray) -> tuple[float, flo
     yaw_change = float(yaw_of(current) - yaw_of(previous))
     yaw_change = (yaw_change + np.pi) % (2 * np.pi) - np.pi
     return float(np.hypot(step[0], step[1])), yaw_change, float(step[2])
+
+
+def fit_yaw_translation(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """4-DoF least squares (rotation about z, translation): the (4, 4) T with target ≈ T source, for (n, 3) points.
+
+    Gravity is known to a robot on the road, so only yaw is fitted: the fit stays well posed for two points or for
+    objects in a line along a street, where a full 3-D rotation is not.
+    """
+    if source.shape != target.shape or len(source) < 2:
+        raise ValueError(f"need two (n >= 2, 3) point sets of equal shape, got {source.shape} and {target.shape}")
+    mean_src, mean_tgt = source.mean(axis=0), target.mean(axis=0)
+    src, tgt = source[:, :2] - mean_src[:2], target[:, :2] - mean_tgt[:2]
+    yaw = np.arctan2((src[:, 0] * tgt[:, 1] - src[:, 1] * tgt[:, 0]).sum(), (src * tgt).sum())
+    rotation = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
+    return make_pose(rotation, mean_tgt - rotation @ mean_src)

@@ -7,6 +7,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from neoslam.config import NOISE_PROFILES, NeoSLAMConfig
 from neoslam.datasets.simulated import SimulatedDataset, is_simulated_dataset, read_dataset, write_dataset
 from neoslam.errors import ConfigError, InputError
@@ -91,7 +93,10 @@ def _metrics(dataset: SimulatedDataset, result: RunResult, config: NeoSLAMConfig
         corrected = trajectory_metrics(result.estimate, truth, evaluation)
         metrics["ate_rmse_m"] = {"odometry": odometry["ate_rmse_m"], "corrected": corrected["ate_rmse_m"]}
         metrics["trajectory"] = {"alignment": evaluation.alignment, "odometry": odometry, "corrected": corrected}
-    metrics["loops"] = loop_metrics(result.loop_closures, truth, config.evaluation)
+    keyframe_frames = np.array([k.frame_index for k in result.keyframes], dtype=int)
+    metrics["loops"] = loop_metrics(result.loop_closures, truth, config.evaluation, keyframe_frames)
+    metrics["keyframes"] = len(result.keyframes)
+    metrics["hebbian_bytes"] = result.hebbian.nbytes
     metrics["objects"] = len(result.objects)
     metrics["cells"] = cell_metrics(result.cell_states, result.odometry, result.object_vector_cells)
     metrics["timing"] = timing_metrics(result.frame_times_s, wall_s)

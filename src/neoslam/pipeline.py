@@ -1,9 +1,9 @@
 """NeoSLAM: `step(frame)` reads as the paper's steps; `run(frames)` drives it with a progress bar.
 
-Built so far: path integration in the head-direction and grid cells (paper 3.3, NeuroSLAM), the object-vector
-cells learning their firing field from the object vectors the robot observes (3.4), and the object map. The
-estimate is still the odometry: object keyframes, loop closure and the experience map (3.2, 3.5, 3.6) plug in here
-without changing the CLI.
+Built so far: path integration in the head-direction and grid cells (paper 3.3, NeuroSLAM), object keyframes and
+loop closure by graph matching (3.2), the object-vector cells learning their firing field from keyframe objects
+(3.4), the Hebbian association of keyframes with the cells (3.5), and the object map. The estimate is still the
+odometry: the experience map (3.6) that corrects it at each loop plugs in here without changing the CLI.
 """
 
 from __future__ import annotations
@@ -15,12 +15,13 @@ from dataclasses import dataclass
 import numpy as np
 from tqdm import tqdm
 
-from neoslam.cells import GridCells, HeadDirectionCells, ObjectVectorCells, circular_difference
+from neoslam.cells import GridCells, HeadDirectionCells, HebbianMemory, ObjectVectorCells, circular_difference
 from neoslam.config import NeoSLAMConfig
-from neoslam.geometry import planar_motion, transform_points
-from neoslam.io.frames import camera_points_to_robot
+from neoslam.geometry import planar_motion
+from neoslam.loop.detector import LoopClosureDetector
+from neoslam.loop.keyframes import KeyframeBuilder
 from neoslam.mapping.object_map import MapObject, ObjectMap
-from neoslam.types import Frame, LoopClosure, Trajectory
+from neoslam.types import Frame, Keyframe, LoopClosure, Trajectory
 
 __all__ = ["NeoSLAM", "RunResult", "run", "object_vectors"]
 
@@ -31,17 +32,17 @@ class RunResult:
     odometry: Trajectory
     cell_states: np.ndarray  # (n, 4) decoded grid cells unwrapped to metres (x, y, z) and head direction (rad)
     objects: list[MapObject]
+    keyframes: list[Keyframe]
     loop_closures: list[LoopClosure]
+    first_keyframe_scores: np.ndarray  # matching score of keyframe 0 against every keyframe (paper Fig. 4c)
     object_vector_cells: ObjectVectorCells
+    hebbian: HebbianMemory
     frame_times_s: np.ndarray  # wall time of each step
 
 
-def object_vectors(pose: np.ndarray, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
-    """Distance (m, horizontal) and allocentric direction (rad) from the robot to each observed object (eq. 11)."""
-    if not frame.observations:
-        return np.empty(0), np.empty(0)
-    in_robot = camera_points_to_robot(np.array([o.center_camera for o in frame.observations]))
-    offsets = transform_points(pose, in_robot) - pose[:3, 3]
+def object_vectors(pose: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance (m, horizontal) and allocentric direction (rad) from the robot to world points (eq. 11)."""
+    offsets = centres - pose[:3, 3]
     return np.hypot(offsets[:, 0], offsets[:, 1]), np.arctan2(offsets[:, 1], offsets[:, 0])
 
 
@@ -53,6 +54,9 @@ class NeoSLAM:
         self.grid_cells = GridCells(config.grid_cells)
         self.head_direction = HeadDirectionCells(config.head_direction)
         self.object_vector_cells = ObjectVectorCells(config.object_vector)
+        self.hebbian = HebbianMemory(config.hebbian)
+        self.keyframes = KeyframeBuilder(config.keyframes)
+        self.loop_detector = LoopClosureDetector(config.keyframes, config.matching)
         self.object_map = ObjectMap(config.object_map)
         self.loop_closures: list[LoopClosure] = []
         self._previous_odometry: np.ndarray | None = None
@@ -65,16 +69,21 @@ class NeoSLAM:
         self._cell_states: list[np.ndarray] = []
 
     def step(self, frame: Frame) -> np.ndarray:
-        """Process one frame; returns the current pose estimate T_world_robot."""
-        self._integrate_path(frame)
-        pose = frame.odometry_pose  # the experience map will correct this once loops are closed
-        self._learn_object_vectors(pose, frame)
+        """Process one frame (the paper's steps in order); returns the current pose estimate T_world_robot."""
+        travelled_m = self._integrate_path(frame)  # 3.3: head-direction and grid cells
+        pose = frame.odometry_pose  # 3.6 will correct this with the experience map
+        keyframe = self.keyframes.add(frame.index, pose, frame.observations, travelled_m)  # 3.2
+        if keyframe is not None:
+            self._learn_object_vectors(keyframe)  # 3.4
+            self._associate(keyframe)  # 3.5
+            self._close_loop(keyframe)  # 3.2: matching against stored keyframes
         self.object_map.add(pose, frame.observations)
         self._record(frame, pose)
         return pose
 
-    def _integrate_path(self, frame: Frame) -> None:
-        """Head-direction cells turn by the yaw change; grid cells move along the decoded heading (NeuroSLAM)."""
+    def _integrate_path(self, frame: Frame) -> float:
+        """Head-direction cells turn by the yaw change; grid cells move along the decoded heading (NeuroSLAM).
+        Returns the distance travelled since the previous frame."""
         previous = frame.odometry_pose if self._previous_odometry is None else self._previous_odometry
         horizontal, yaw_change, vertical = planar_motion(previous, frame.odometry_pose)
         self.head_direction.step(yaw_change)
@@ -85,20 +94,29 @@ class NeoSLAM:
         )
         self._grid_centre = centre
         self._previous_odometry = frame.odometry_pose
+        return float(np.hypot(horizontal, vertical))
 
-    def _learn_object_vectors(self, pose: np.ndarray, frame: Frame) -> None:
-        """Train the OVCN, one epoch per `keyframes_per_epoch` views of objects, for `epochs` epochs (paper 3.4).
-
-        Until object keyframes land, every frame that sees objects counts as one keyframe of training data.
-        """
+    def _learn_object_vectors(self, keyframe: Keyframe) -> None:
+        """Train the OVCN, one epoch per `keyframes_per_epoch` keyframes, for `epochs` epochs (paper 3.4)."""
         config = self.config.object_vector
-        if len(self.object_vector_cells.loss_history) >= config.epochs or not frame.observations:
+        if len(self.object_vector_cells.loss_history) >= config.epochs:
             return
-        self._object_vector_batch.append(object_vectors(pose, frame))
+        self._object_vector_batch.append(object_vectors(keyframe.pose, keyframe.centers))
         if len(self._object_vector_batch) == config.keyframes_per_epoch:
             distances, directions = (np.concatenate(parts) for parts in zip(*self._object_vector_batch, strict=True))
             self.object_vector_cells.train_epoch(distances, directions)
             self._object_vector_batch.clear()
+
+    def _associate(self, keyframe: Keyframe) -> None:
+        """Eq. 14: tie the keyframe's template activity O^k to the current grid x head-direction activity."""
+        activity = self.object_vector_cells.template_activity(*object_vectors(keyframe.pose, keyframe.centers))
+        if activity > 0:  # a silent template stores nothing (eq. 14 with O^k <= 0)
+            self.hebbian.associate(keyframe.id, activity, self.grid_cells.activity, self.head_direction.activity)
+
+    def _close_loop(self, keyframe: Keyframe) -> None:
+        odometer = self.keyframes.odometer_m
+        self.loop_closures.extend(self.loop_detector.query(keyframe, odometer))
+        self.loop_detector.add(keyframe, odometer)
 
     def _record(self, frame: Frame, pose: np.ndarray) -> None:
         self._timestamps.append(frame.timestamp)
@@ -108,13 +126,17 @@ class NeoSLAM:
 
     def result(self, frame_times_s: np.ndarray) -> RunResult:
         stamps = np.asarray(self._timestamps)
+        stored = self.loop_detector.index.keyframes
         return RunResult(
             estimate=Trajectory(stamps, np.asarray(self._estimate).reshape(-1, 4, 4)),
             odometry=Trajectory(stamps, np.asarray(self._odometry).reshape(-1, 4, 4)),
             cell_states=np.asarray(self._cell_states).reshape(-1, 4),
             objects=self.object_map.objects(),
+            keyframes=list(stored),
             loop_closures=list(self.loop_closures),
+            first_keyframe_scores=self.loop_detector.scores(stored[0]) if stored else np.empty(0),
             object_vector_cells=self.object_vector_cells,
+            hebbian=self.hebbian,
             frame_times_s=frame_times_s,
         )
 

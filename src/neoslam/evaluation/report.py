@@ -56,13 +56,20 @@ def _rpe(estimate: Trajectory, truth: Trajectory, config: EvaluationConfig) -> t
     return rpe.translation, rpe.rotation
 
 
-def loop_metrics(closures: list[LoopClosure], truth: Trajectory | None, config: EvaluationConfig) -> dict[str, Any]:
-    """The loops block: counts always, precision and recall only when ground truth exists."""
+def loop_metrics(
+    closures: list[LoopClosure],
+    truth: Trajectory | None,
+    config: EvaluationConfig,
+    query_frames: np.ndarray | None = None,
+) -> dict[str, Any]:
+    """The loops block: counts always, precision and recall only when ground truth exists. Recall is over
+    `query_frames` (the keyframes' frames: only they can close a loop), or all frames."""
     block: dict[str, Any] = {"accepted": len(closures)}
     if truth is None:
         return block
     criteria = LoopCriteria(config.loop_max_distance, config.loop_min_frame_gap)
-    return block | evaluate_closures(closures, truth.positions, criteria).as_dict()
+    positions = truth.positions[:, :2] if config.loop_distance == "horizontal" else truth.positions
+    return block | evaluate_closures(closures, positions, criteria, query_frames).as_dict()
 
 
 def cell_metrics(cell_states: np.ndarray, odometry: Trajectory, object_vector_cells) -> dict[str, Any]:

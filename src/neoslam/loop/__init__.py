@@ -1,0 +1,1 @@
+"""Object keyframes and loop closure by graph matching (paper 3.2)."""

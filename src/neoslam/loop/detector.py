@@ -1,0 +1,100 @@
+"""Loop-closure detection: retrieve candidates, match them, verify, pin the closure to the nearest place, and
+accept only when consecutive keyframes relocalise consistently (a repeated pattern rarely repeats twice in a row
+with the same offset; a revisited place does)."""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from neoslam.config import KeyframeConfig, MatchingConfig
+from neoslam.geometry import invert_pose, rotation_angle
+from neoslam.loop.index import KeyframeIndex
+from neoslam.loop.matching import KeyframeMatch, match_keyframes
+from neoslam.types import Keyframe, LoopClosure
+
+__all__ = ["LoopClosureDetector"]
+
+
+@dataclass(frozen=True)
+class _Relocalisation:
+    keyframe_id: int
+    transform: np.ndarray  # query world -> stored world
+    closure: LoopClosure
+
+
+class LoopClosureDetector:
+    """Keeps the stored keyframes and answers, for each new keyframe, which loops it closes."""
+
+    def __init__(self, keyframes: KeyframeConfig, matching: MatchingConfig) -> None:
+        self.e_max = keyframes.e_max
+        self.config = matching
+        self.index = KeyframeIndex(matching)
+        self._recent: deque[_Relocalisation | None] = deque(maxlen=max(matching.consecutive - 1, 0))
+        self._emitted: set[int] = set()
+
+    def _match(self, query: Keyframe, stored: int) -> KeyframeMatch:
+        return match_keyframes(query, self.index.keyframes[stored], self.config, self.e_max)
+
+    def _closure(self, query: Keyframe, match: KeyframeMatch) -> tuple[LoopClosure, np.ndarray]:
+        """The closure and the offset (x, y, z) between the two robot poses implied by the fit."""
+        stored = self.index.keyframes[match.match]
+        relative = invert_pose(stored.pose) @ match.transform @ query.pose  # T_stored_query
+        closure = LoopClosure(
+            query_frame=query.frame_index,
+            match_frame=stored.frame_index,
+            query_keyframe=query.id,
+            match_keyframe=stored.id,
+            score=match.score,
+            n_matches=match.n_matches,
+            relative_pose=relative,
+        )
+        return closure, relative[:3, 3]
+
+    def relocalise(self, keyframe: Keyframe, odometer_m: float) -> _Relocalisation | None:
+        """The first verified match among the retrieval candidates, moved to the stored keyframe nearest to the
+        place the fit puts the robot (so it joins the same place, not a neighbour sharing the same objects)."""
+        eligible = self.index.eligible(keyframe.pose[:3, 3], odometer_m)
+        for candidate in self.index.candidates(keyframe, odometer_m):
+            match = self._match(keyframe, int(candidate))
+            if not match.verified:
+                continue
+            nearest = self.index.nearest((match.transform @ keyframe.pose)[:3, 3], eligible)
+            if nearest != match.match:
+                match = self._match(keyframe, nearest)
+                if not match.verified:
+                    continue
+            closure, offset = self._closure(keyframe, match)
+            same_place = np.linalg.norm(offset[:2]) <= self.config.max_place_offset
+            if same_place and abs(offset[2]) <= self.config.max_vertical_offset:
+                return _Relocalisation(keyframe.id, match.transform, closure)
+        return None
+
+    def _consistent(self, a: _Relocalisation, b: _Relocalisation) -> bool:
+        difference = invert_pose(a.transform) @ b.transform
+        return bool(
+            np.linalg.norm(difference[:3, 3]) <= self.config.consistent_distance
+            and np.degrees(rotation_angle(difference[:3, :3])) <= self.config.consistent_yaw_deg
+        )
+
+    def query(self, keyframe: Keyframe, odometer_m: float) -> list[LoopClosure]:
+        """Closures accepted with this keyframe: its own, and those of the preceding keyframes it confirms."""
+        current = self.relocalise(keyframe, odometer_m)
+        history = list(self._recent)
+        self._recent.append(current)
+        if current is None or any(h is None or not self._consistent(h, current) for h in history):
+            return []
+        if any(h.keyframe_id != keyframe.id - len(history) + i for i, h in enumerate(history)):
+            return []  # not consecutive keyframes
+        accepted = [h.closure for h in [*history, current] if h.keyframe_id not in self._emitted]
+        self._emitted.update(c.query_keyframe for c in accepted)
+        return accepted
+
+    def add(self, keyframe: Keyframe, odometer_m: float) -> None:
+        self.index.add(keyframe, odometer_m)
+
+    def scores(self, keyframe: Keyframe) -> np.ndarray:
+        """Matching score of `keyframe` against every stored keyframe (paper Fig. 4c), no retrieval, no gate."""
+        return np.array([self._match(keyframe, i).score for i in range(len(self.index))])

@@ -1,0 +1,79 @@
+"""Candidate retrieval: which stored keyframes a new keyframe is matched against in full.
+
+The paper compares a keyframe with all others. Here the query cost stays small as the map grows: a stored keyframe
+is a candidate only if it is not recent (`exclude_recent_distance` of travel), and lies within a search radius of
+the current estimated position that grows with the distance travelled since it was made (odometry drift bounds
+how far the estimate can be off). Candidates are ranked by a coarse signature (label histogram and histogram of
+pairwise object distances) and the best few are matched.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from neoslam.config import MatchingConfig
+from neoslam.types import Keyframe
+
+__all__ = ["KeyframeIndex", "signature"]
+
+LABEL_BINS = 8  # labels hashed into this many bins (YOLO's classes in use are far fewer)
+DISTANCE_BINS = np.linspace(0.0, 40.0, 21)  # m, pairwise object distances
+INITIAL_CAPACITY = 256
+
+
+def _label_bin(label: str) -> int:
+    return sum(label.encode()) % LABEL_BINS  # stable across runs, unlike hash()
+
+
+def signature(keyframe: Keyframe) -> np.ndarray:
+    """Unit vector of label counts and the distribution of pairwise distances: invariant to rotation and to the
+    direction the place is driven in."""
+    labels = np.bincount([_label_bin(label) for label in keyframe.labels], minlength=LABEL_BINS).astype(float)
+    upper = keyframe.distances[np.triu_indices(len(keyframe.labels), k=1)]
+    distances = np.histogram(upper, bins=DISTANCE_BINS)[0].astype(float)
+    vector = np.concatenate([labels / max(labels.sum(), 1.0), distances / max(distances.sum(), 1.0)])
+    return vector / max(np.linalg.norm(vector), 1e-12)
+
+
+class KeyframeIndex:
+    """Stored keyframes with their position, odometer reading and signature, in growable arrays."""
+
+    def __init__(self, config: MatchingConfig) -> None:
+        self.config = config
+        self.keyframes: list[Keyframe] = []
+        self._positions = np.zeros((INITIAL_CAPACITY, 2))
+        self._odometer = np.zeros(INITIAL_CAPACITY)
+        self._signatures = np.zeros((INITIAL_CAPACITY, LABEL_BINS + len(DISTANCE_BINS) - 1))
+
+    def __len__(self) -> int:
+        return len(self.keyframes)
+
+    def add(self, keyframe: Keyframe, odometer_m: float) -> None:
+        n = len(self.keyframes)
+        if n == len(self._odometer):  # double the capacity
+            self._positions = np.concatenate([self._positions, np.zeros_like(self._positions)])
+            self._odometer = np.concatenate([self._odometer, np.zeros_like(self._odometer)])
+            self._signatures = np.concatenate([self._signatures, np.zeros_like(self._signatures)])
+        self._positions[n] = keyframe.pose[:2, 3]
+        self._odometer[n] = odometer_m
+        self._signatures[n] = signature(keyframe)
+        self.keyframes.append(keyframe)
+
+    def eligible(self, position: np.ndarray, odometer_m: float) -> np.ndarray:
+        """Indices of stored keyframes that are old enough and within the drift-bounded search radius."""
+        n = len(self.keyframes)
+        travelled = odometer_m - self._odometer[:n]
+        radius = self.config.search_radius + self.config.search_radius_per_metre * travelled
+        near = np.linalg.norm(self._positions[:n] - position[:2], axis=1) <= radius
+        return np.flatnonzero(near & (travelled >= self.config.exclude_recent_distance))
+
+    def candidates(self, query: Keyframe, odometer_m: float) -> np.ndarray:
+        """The best `candidates` eligible keyframes by signature similarity, best first."""
+        eligible = self.eligible(query.pose[:3, 3], odometer_m)
+        similarity = self._signatures[eligible] @ signature(query)
+        order = np.argsort(-similarity, kind="stable")[: self.config.candidates]
+        return eligible[order]
+
+    def nearest(self, position: np.ndarray, among: np.ndarray) -> int:
+        """The keyframe among `among` whose pose is closest to a position (x, y)."""
+        return int(among[np.argmin(np.linalg.norm(self._positions[among] - position[:2], axis=1))])

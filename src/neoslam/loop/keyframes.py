@@ -1,0 +1,132 @@
+"""Object keyframes (paper 3.2): the current object and the objects around it, in the world frame.
+
+Single stereo frames see few objects with depth noise that grows with the square of depth, so observations are
+first fused over a short stretch of road (the local window), where odometry drift is small: each window object is
+the inverse-variance weighted mean of its observations, moved to the world with the pose estimate of the frame
+that saw them. Every `spacing` metres of travel, the window object nearest to the robot becomes the current
+object and, with the window objects within `neighbourhood_radius` of it, a keyframe.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from neoslam.config import KeyframeConfig
+from neoslam.geometry import transform_points
+from neoslam.io.frames import camera_points_to_robot
+from neoslam.types import Keyframe, ObjectObservation
+
+__all__ = ["LocalObjectWindow", "KeyframeBuilder"]
+
+
+@dataclass
+class _WindowObject:
+    label: str
+    weighted_sum: np.ndarray
+    weight: float
+    patch_sum: np.ndarray
+    observations: int
+    last_seen_m: float  # odometer reading of the last observation
+
+    @property
+    def position(self) -> np.ndarray:
+        return self.weighted_sum / self.weight
+
+
+@dataclass
+class LocalObjectWindow:
+    """Objects fused from the observations of the last `window_length` metres of travel."""
+
+    config: KeyframeConfig
+    objects: list[_WindowObject] = field(default_factory=list)
+
+    def add(self, pose: np.ndarray, observations: tuple[ObjectObservation, ...], odometer_m: float) -> None:
+        """Fuse one frame's observations, seen from robot pose T_world_robot, and forget stale objects."""
+        if observations:
+            centres = self._object_centres(observations)
+            world = transform_points(pose, camera_points_to_robot(centres))
+            # Stereo depth error grows with depth squared: weight each view by its inverse variance.
+            weights = 1.0 / (self.config.depth_sigma_at_1m * centres[:, 2] ** 2) ** 2
+            for observation, point, weight in zip(observations, world, weights, strict=True):
+                self._fuse(observation, point, float(weight), odometer_m)
+        horizon = odometer_m - self.config.window_length
+        self.objects = [o for o in self.objects if o.last_seen_m >= horizon]
+
+    def _object_centres(self, observations: tuple[ObjectObservation, ...]) -> np.ndarray:
+        """Stereo centres moved from the visible surface to the object's middle, along the viewing ray: otherwise
+        a place driven the other way sees every object from its other side, a metre or two away. The depth to add
+        is the radius of the class's footprint ellipse in the direction of the ray, taking objects to lie along
+        the road, that is along the robot's heading."""
+        surface = np.array([o.center_camera for o in observations])
+        footprint = np.array([self.config.footprints.get(o.label, (0.0, 0.0)) for o in observations]) / 2
+        bearing = np.arctan2(surface[:, 0], surface[:, 2])  # angle between the ray and the heading
+        with np.errstate(divide="ignore"):
+            radius = 1.0 / np.sqrt((np.cos(bearing) / footprint[:, 0]) ** 2 + (np.sin(bearing) / footprint[:, 1]) ** 2)
+        radius = np.nan_to_num(radius)  # a class without a footprint is taken as a point
+        return surface * (1.0 + radius / np.linalg.norm(surface, axis=1))[:, None]
+
+    def _fuse(self, observation: ObjectObservation, point: np.ndarray, weight: float, odometer_m: float) -> None:
+        same_label = [o for o in self.objects if o.label == observation.label]
+        if same_label:
+            distances = [np.linalg.norm(o.position - point) for o in same_label]
+            nearest = same_label[int(np.argmin(distances))]
+            if min(distances) <= self.config.association_radius:
+                nearest.weighted_sum += weight * point
+                nearest.weight += weight
+                nearest.patch_sum += observation.patch
+                nearest.observations += 1
+                nearest.last_seen_m = odometer_m
+                return
+        self.objects.append(
+            _WindowObject(observation.label, weight * point, weight, observation.patch.astype(float), 1, odometer_m)
+        )
+
+    def confirmed(self) -> list[_WindowObject]:
+        """Objects seen often enough to trust (single sightings are mostly false positives)."""
+        return [o for o in self.objects if o.observations >= self.config.min_observations]
+
+
+class KeyframeBuilder:
+    """Makes a keyframe every `spacing` metres of travel from the local window."""
+
+    def __init__(self, config: KeyframeConfig) -> None:
+        self.config = config
+        self.window = LocalObjectWindow(config)
+        self.odometer_m = 0.0
+        self._next_keyframe_m = 0.0
+        self._next_id = 0
+
+    def add(self, frame_index: int, pose: np.ndarray, observations, travelled_m: float) -> Keyframe | None:
+        """Feed one frame (pose estimate and observations); returns a new keyframe when one is due."""
+        self.odometer_m += travelled_m
+        self.window.add(pose, observations, self.odometer_m)
+        if self.odometer_m < self._next_keyframe_m:
+            return None
+        keyframe = self._make(frame_index, pose)
+        if keyframe is not None:
+            self._next_keyframe_m = self.odometer_m + self.config.spacing
+        return keyframe
+
+    def _make(self, frame_index: int, pose: np.ndarray) -> Keyframe | None:
+        objects = self.window.confirmed()
+        if not objects:
+            return None
+        positions = np.array([o.position for o in objects])
+        current = int(np.argmin(np.linalg.norm(positions[:, :2] - pose[:2, 3], axis=1)))  # the current object
+        around = np.flatnonzero(
+            np.linalg.norm(positions - positions[current], axis=1) <= self.config.neighbourhood_radius
+        )
+        if len(around) < self.config.min_objects:
+            return None
+        keyframe = Keyframe(
+            id=self._next_id,
+            frame_index=frame_index,
+            pose=pose.copy(),
+            centers=positions[around],
+            labels=tuple(objects[i].label for i in around),
+            patches=np.array([objects[i].patch_sum / objects[i].observations for i in around]),
+        )
+        self._next_id += 1
+        return keyframe

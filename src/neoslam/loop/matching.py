@@ -1,0 +1,165 @@
+"""Keyframe matching (paper eq. 2-5) and its verification.
+
+Candidate assignments (i, i') pair a query object with a stored one of the same label (H^l, eq. 3) whose
+appearance patches differ by at most the RMSE threshold. Over these candidates only, the affinity
+M_(a,b) = max(0, e_max − |e_ij − e_i'j'|) (eq. 2, 4) rewards pairs of assignments that keep the distance between
+their objects; X* = argmax Xᵀ M X (eq. 5) is approximated by spectral matching: the principal eigenvector of M,
+then a greedy discretisation that takes candidates in order of their weight and drops those in conflict.
+
+Verification keeps precision: a match must be supported by other matches with consistent distances, then a
+rigid 4-DoF fit (yaw, translation) of the matched centres must explain at least `min_inliers` of them within
+`inlier_distance` in the ground plane with a small RMS residual. The fit is also the metric constraint between
+the two keyframes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from neoslam.config import MatchingConfig
+from neoslam.geometry import fit_yaw_translation, transform_points
+from neoslam.types import Keyframe
+
+__all__ = [
+    "KeyframeMatch",
+    "candidate_assignments",
+    "affinity_matrix",
+    "principal_eigenvector",
+    "spectral_matching",
+    "match_keyframes",
+]
+
+POWER_ITERATIONS = 100
+POWER_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class KeyframeMatch:
+    """The outcome of matching a query keyframe against a stored one."""
+
+    query: int
+    match: int
+    score: float  # X*ᵀ M X / e_max of the spectral solution: about the number of consistent pairs (paper: > 1)
+    pairs: np.ndarray  # (k, 2) verified (query object, stored object) index pairs
+    transform: np.ndarray  # (4, 4) maps query world points onto the stored keyframe's world points
+    residual_rms: float  # m, of the verified pairs under `transform`
+    verified: bool
+
+    @property
+    def n_matches(self) -> int:
+        return len(self.pairs)
+
+
+def _patch_rmse(query: np.ndarray, stored: np.ndarray) -> np.ndarray:
+    """(n, m) RMSE between every query and stored patch, grey levels."""
+    q = query.reshape(len(query), -1).astype(float)
+    s = stored.reshape(len(stored), -1).astype(float)
+    squared = (q**2).sum(1)[:, None] + (s**2).sum(1)[None, :] - 2 * q @ s.T
+    return np.sqrt(np.maximum(squared, 0.0) / q.shape[1])
+
+
+def candidate_assignments(query: Keyframe, stored: Keyframe, config: MatchingConfig) -> np.ndarray:
+    """(c, 2) pairs (i, i') with equal labels (H^l, eq. 3) and similar appearance (RMSE <= threshold)."""
+    same_label = np.asarray(query.labels)[:, None] == np.asarray(stored.labels)[None, :]
+    similar = _patch_rmse(query.patches, stored.patches) <= config.appearance_rmse_threshold
+    return np.argwhere(same_label & similar)
+
+
+def affinity_matrix(query: Keyframe, stored: Keyframe, candidates: np.ndarray, e_max: float) -> np.ndarray:
+    """M over the candidates (eq. 2, 4): e_max − |e_ij − e_i'j'| clipped at 0; 0 for assignments in conflict."""
+    q, s = candidates[:, 0], candidates[:, 1]
+    affinity = np.maximum(e_max - np.abs(query.distances[np.ix_(q, q)] - stored.distances[np.ix_(s, s)]), 0.0)
+    conflict = (q[:, None] == q[None, :]) | (s[:, None] == s[None, :])  # one object cannot match two
+    affinity[conflict] = 0.0
+    return affinity
+
+
+def principal_eigenvector(affinity: np.ndarray) -> np.ndarray:
+    """Power iteration from the all-ones vector: M is symmetric and non-negative, so the principal eigenvector is
+    non-negative (Perron-Frobenius) and converges in a few dozen products, far cheaper than a full eigensolver."""
+    vector = np.full(len(affinity), 1.0 / np.sqrt(len(affinity)))
+    for _ in range(POWER_ITERATIONS):
+        product = affinity @ vector
+        norm = np.linalg.norm(product)
+        if norm == 0:
+            return np.zeros_like(vector)
+        product /= norm
+        if np.abs(product - vector).max() < POWER_TOLERANCE:
+            return product
+        vector = product
+    return vector
+
+
+def spectral_matching(affinity: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+    """Indices into `candidates` of X* (eq. 5): principal eigenvector, then greedy conflict-free discretisation."""
+    if len(candidates) == 0:
+        return np.empty(0, dtype=int)
+    weight = principal_eigenvector(affinity)
+    chosen: list[int] = []
+    used_query: set[int] = set()
+    used_stored: set[int] = set()
+    for index in np.argsort(-weight, kind="stable"):
+        if weight[index] <= 0:
+            break
+        i, j = candidates[index]
+        if i in used_query or j in used_stored:
+            continue
+        chosen.append(int(index))
+        used_query.add(int(i))
+        used_stored.add(int(j))
+    return np.array(chosen, dtype=int)
+
+
+def _supported(affinity: np.ndarray, chosen: np.ndarray, min_support: int) -> np.ndarray:
+    """Repeatedly drop matches with fewer than `min_support` distance-consistent partners among the others."""
+    keep = chosen
+    while len(keep):
+        support = (affinity[np.ix_(keep, keep)] > 0).sum(axis=1)
+        if (support >= min_support).all():
+            break
+        keep = keep[support >= min_support]
+    return keep
+
+
+def _horizontal_residuals(transform: np.ndarray, query: np.ndarray, stored: np.ndarray) -> np.ndarray:
+    """Distances in the ground plane: objects stand on the road at similar heights, so height carries little
+    about a place, and vertical odometry (and KITTI's ground truth in height) is the least reliable axis."""
+    return np.linalg.norm(transform_points(transform, query)[:, :2] - stored[:, :2], axis=1)
+
+
+def _fit(query: np.ndarray, stored: np.ndarray, config: MatchingConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Rigid 4-DoF fit, trimmed: drop the worst match and refit until every match is within `inlier_distance`
+    (least squares alone lets one wrong match drag the fit off all the right ones). Returns the transform and the
+    inlier mask."""
+    inliers = np.ones(len(query), dtype=bool)
+    transform = np.eye(4)
+    while inliers.sum() >= 2:
+        transform = fit_yaw_translation(query[inliers], stored[inliers])
+        residual = np.where(inliers, _horizontal_residuals(transform, query, stored), -np.inf)
+        worst = int(np.argmax(residual))
+        if residual[worst] <= config.inlier_distance:
+            break
+        inliers[worst] = False
+    return transform, inliers
+
+
+def match_keyframes(query: Keyframe, stored: Keyframe, config: MatchingConfig, e_max: float) -> KeyframeMatch:
+    """Match two keyframes and verify the result (see the module docstring)."""
+    candidates = candidate_assignments(query, stored, config)
+    affinity = affinity_matrix(query, stored, candidates, e_max)
+    chosen = spectral_matching(affinity, candidates)
+    score = float(affinity[np.ix_(chosen, chosen)].sum() / e_max) if len(chosen) else 0.0
+    kept = _supported(affinity, chosen, config.min_support)
+    pairs = candidates[kept]
+    transform, residual_rms, verified = np.eye(4), float("inf"), False
+    if len(pairs) >= max(config.min_inliers, 2) and score > config.score_threshold:
+        transform, inliers = _fit(query.centers[pairs[:, 0]], stored.centers[pairs[:, 1]], config)
+        pairs = pairs[inliers]
+        if len(pairs) >= 2:
+            residual = _horizontal_residuals(transform, query.centers[pairs[:, 0]], stored.centers[pairs[:, 1]])
+            residual_rms = float(np.sqrt(np.mean(residual**2)))
+        needed = max(config.min_inliers, config.min_inlier_ratio * min(len(query.labels), len(stored.labels)))
+        verified = len(pairs) >= needed and residual_rms <= config.max_fit_residual
+    return KeyframeMatch(query.id, stored.id, score, pairs, transform, residual_rms, verified)
