@@ -29,7 +29,13 @@ from neoslam.pipeline import RunResult, run
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.sim.simulator import SimulatedRecording, simulate
 from neoslam.types import Trajectory
-from neoslam.viz.plots import plot_error_along_route, plot_map_2d, plot_map_3d, plot_ovcn_loss
+from neoslam.viz.plots import (
+    plot_error_along_route,
+    plot_map_2d,
+    plot_map_3d,
+    plot_matching_scores,
+    plot_ovcn_loss,
+)
 
 __all__ = ["DEFAULT_ROUTE", "simulation_config", "record", "simulate_dataset", "run_dataset", "evaluate_files"]
 
@@ -103,10 +109,18 @@ def _metrics(dataset: SimulatedDataset, result: RunResult, config: NeoSLAMConfig
     return metrics
 
 
-def _plots(folder: Path, result: RunResult, truth: Trajectory | None) -> None:
+def _plots(folder: Path, result: RunResult, truth: Trajectory | None, threshold: float) -> None:
     folder.mkdir()
     if result.object_vector_cells.loss_history:
         plot_ovcn_loss(folder / "ovcn_loss.png", result.object_vector_cells.loss_history)
+    if result.recognised_keyframe is not None:
+        plot_matching_scores(
+            folder / "matching_scores.png",
+            result.recognised_keyframe,
+            *result.recognised_scores,
+            threshold,
+            [c.query_keyframe for c in result.loop_closures if c.match_keyframe == result.recognised_keyframe],
+        )
     estimates = {"odometry": result.odometry, "corrected": result.estimate}
     if truth is None or len(truth) < MIN_ALIGNMENT_POSES:
         plot_map_2d(folder / "map_2d.png", estimates, result.objects)
@@ -143,7 +157,7 @@ def run_dataset(
         write_config(staging / "config.yaml", config)
         metrics = _metrics(dataset, result, config, wall_s)
         write_metrics(staging / "metrics.json", metrics)
-        _plots(staging / "plots", result, dataset.ground_truth)
+        _plots(staging / "plots", result, dataset.ground_truth, config.matching.score_threshold)
     return metrics
 
 

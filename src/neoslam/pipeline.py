@@ -34,7 +34,8 @@ class RunResult:
     objects: list[MapObject]
     keyframes: list[Keyframe]
     loop_closures: list[LoopClosure]
-    first_keyframe_scores: np.ndarray  # matching score of keyframe 0 against every keyframe (paper Fig. 4c)
+    recognised_keyframe: int | None  # the first stored keyframe that a closure recognised
+    recognised_scores: tuple[np.ndarray, np.ndarray]  # its spectral and verified scores against all (Fig. 4c)
     object_vector_cells: ObjectVectorCells
     hebbian: HebbianMemory
     frame_times_s: np.ndarray  # wall time of each step
@@ -127,6 +128,8 @@ class NeoSLAM:
     def result(self, frame_times_s: np.ndarray) -> RunResult:
         stamps = np.asarray(self._timestamps)
         stored = self.loop_detector.index.keyframes
+        recognised = min((c.match_keyframe for c in self.loop_closures), default=None)
+        empty = (np.empty(0), np.empty(0))
         return RunResult(
             estimate=Trajectory(stamps, np.asarray(self._estimate).reshape(-1, 4, 4)),
             odometry=Trajectory(stamps, np.asarray(self._odometry).reshape(-1, 4, 4)),
@@ -134,7 +137,8 @@ class NeoSLAM:
             objects=self.object_map.objects(),
             keyframes=list(stored),
             loop_closures=list(self.loop_closures),
-            first_keyframe_scores=self.loop_detector.scores(stored[0]) if stored else np.empty(0),
+            recognised_keyframe=recognised,
+            recognised_scores=self.loop_detector.scores(stored[recognised]) if recognised is not None else empty,
             object_vector_cells=self.object_vector_cells,
             hebbian=self.hebbian,
             frame_times_s=frame_times_s,

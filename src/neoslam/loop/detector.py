@@ -95,6 +95,8 @@ class LoopClosureDetector:
     def add(self, keyframe: Keyframe, odometer_m: float) -> None:
         self.index.add(keyframe, odometer_m)
 
-    def scores(self, keyframe: Keyframe) -> np.ndarray:
-        """Matching score of `keyframe` against every stored keyframe (paper Fig. 4c), no retrieval, no gate."""
-        return np.array([self._match(keyframe, i).score for i in range(len(self.index))])
+    def scores(self, keyframe: Keyframe) -> tuple[np.ndarray, np.ndarray]:
+        """Spectral and verified matching scores of `keyframe` against every stored keyframe (paper Fig. 4c), with
+        no retrieval and no gate."""
+        matches = [self._match(keyframe, i) for i in range(len(self.index))]
+        return np.array([m.score for m in matches]), np.array([m.verified_score for m in matches])

@@ -46,6 +46,7 @@ class KeyframeMatch:
     transform: np.ndarray  # (4, 4) maps query world points onto the stored keyframe's world points
     residual_rms: float  # m, of the verified pairs under `transform`
     verified: bool
+    verified_score: float  # the score over the verified pairs only; 0 when the match is not verified
 
     @property
     def n_matches(self) -> int:
@@ -153,13 +154,14 @@ def match_keyframes(query: Keyframe, stored: Keyframe, config: MatchingConfig, e
     score = float(affinity[np.ix_(chosen, chosen)].sum() / e_max) if len(chosen) else 0.0
     kept = _supported(affinity, chosen, config.min_support)
     pairs = candidates[kept]
-    transform, residual_rms, verified = np.eye(4), float("inf"), False
+    transform, residual_rms, verified, verified_score = np.eye(4), float("inf"), False, 0.0
     if len(pairs) >= max(config.min_inliers, 2) and score > config.score_threshold:
         transform, inliers = _fit(query.centers[pairs[:, 0]], stored.centers[pairs[:, 1]], config)
-        pairs = pairs[inliers]
+        kept, pairs = kept[inliers], pairs[inliers]
         if len(pairs) >= 2:
             residual = _horizontal_residuals(transform, query.centers[pairs[:, 0]], stored.centers[pairs[:, 1]])
             residual_rms = float(np.sqrt(np.mean(residual**2)))
         needed = max(config.min_inliers, config.min_inlier_ratio * min(len(query.labels), len(stored.labels)))
         verified = len(pairs) >= needed and residual_rms <= config.max_fit_residual
-    return KeyframeMatch(query.id, stored.id, score, pairs, transform, residual_rms, verified)
+        verified_score = float(affinity[np.ix_(kept, kept)].sum() / e_max) if verified else 0.0
+    return KeyframeMatch(query.id, stored.id, score, pairs, transform, residual_rms, verified, verified_score)

@@ -1,5 +1,6 @@
 """The paper's figures as PNG files: maps of ground truth, odometry and the corrected map in 2-D and 3-D
-(Fig. 3d, 3b), the error of the maps along the route (Fig. 4b) and the OVCN's training loss (Fig. 4a)."""
+(Fig. 3d, 3b), the error of the maps along the route (Fig. 4b), the OVCN's training loss (Fig. 4a) and the matching
+scores of a keyframe against the stored ones (Fig. 4c)."""
 
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ import numpy as np  # noqa: E402
 from neoslam.mapping.object_map import MapObject  # noqa: E402
 from neoslam.types import Trajectory  # noqa: E402
 
-__all__ = ["plot_map_2d", "plot_map_3d", "plot_error_along_route", "plot_ovcn_loss"]
+__all__ = ["plot_map_2d", "plot_map_3d", "plot_error_along_route", "plot_ovcn_loss", "plot_matching_scores"]
 
 DPI = 120
 STYLES = {
@@ -77,4 +78,25 @@ def plot_ovcn_loss(path: Path, losses: list[float]) -> None:
     axes.set(xlabel="epoch", ylabel="loss ½(y − O)²", title="Training of the object-vector cells network")
     axes.set_yscale("log")
     axes.grid(alpha=0.3, which="both")
+    _save(figure, path)
+
+
+def plot_matching_scores(
+    path: Path, keyframe: int, scores: np.ndarray, verified: np.ndarray, threshold: float, recognised: list[int]
+) -> None:
+    """Scores of matching one keyframe against every stored keyframe (Fig. 4c): the spectral score XᵀMX / e_max of
+    every comparison, and the score of the matches that pass verification (zero elsewhere)."""
+    figure, axes = plt.subplots(figsize=(8, 4))
+    index = np.arange(len(scores))
+    axes.plot(index, scores, color="tab:gray", linewidth=0.7, label="spectral score")
+    axes.plot(index, verified, color="tab:blue", linewidth=1.2, label="verified score")
+    axes.axhline(
+        threshold, color="tab:red", linestyle="--", linewidth=0.8, label=f"candidate threshold ({threshold:g})"
+    )
+    if recognised:
+        axes.plot(recognised, verified[recognised], "o", color="tab:green", label="accepted closure")
+    axes.set(xlabel="keyframe", ylabel="matching score", title=f"Matching keyframe {keyframe} against the map")
+    axes.set_yscale("symlog", linthresh=1.0)
+    axes.grid(alpha=0.3)
+    axes.legend(loc="best", fontsize=8)
     _save(figure, path)

@@ -1,0 +1,179 @@
+"""Loop closure by object keyframes: precision and recall on simulated KITTI drives, and query time against map size.
+
+(a) Accuracy: `neoslam simulate` (profile vo) on KITTI 00, 02, 05, 06 and 08 for several seeds, then the pipeline;
+    closures judged against ground truth (true when within 5 m horizontally and 100 frames apart; 3-D precision
+    too), recall over the keyframes that truly revisit a place. Also the default town scenario, whose repeated
+    layout must give no false closure.
+(b) Speed: median query time (retrieval + matching + verification) with 100 ... 5,000 keyframes stored, built by
+    tiling the keyframes of a simulated KITTI 00 drive over a larger area.
+
+    python benchmarks/loops.py [--quick] [--json FILE]
+"""
+
+from __future__ import annotations
+
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
+from neoslam.config import NeoSLAMConfig, load_config  # noqa: E402
+from neoslam.datasets.simulated import read_dataset  # noqa: E402
+from neoslam.evaluation.loops import LoopCriteria, evaluate_closures  # noqa: E402
+from neoslam.jobs import record, simulate_dataset, simulation_config  # noqa: E402
+from neoslam.loop.detector import LoopClosureDetector  # noqa: E402
+from neoslam.pipeline import NeoSLAM  # noqa: E402
+from neoslam.types import Keyframe  # noqa: E402
+
+SEQUENCES = ["00", "02", "05", "06", "08"]
+SEEDS = [1, 2, 3]
+MAP_SIZES = [100, 500, 1000, 2000, 5000]
+QUERIES = 200
+TILE_OFFSET_M = 1500.0  # copies of the KITTI 00 keyframes are laid this far apart
+
+
+def _drive(config: NeoSLAMConfig, data: Path) -> tuple[NeoSLAM, np.ndarray, list[float]]:
+    """Run the pipeline on a dataset; returns it, the truth positions and the wall time of each loop query."""
+    dataset = read_dataset(data)
+    slam = NeoSLAM(config)
+    detector_query = slam.loop_detector.query
+    query_times: list[float] = []
+
+    def timed_query(keyframe, odometer):
+        start = time.perf_counter()
+        accepted = detector_query(keyframe, odometer)
+        query_times.append(time.perf_counter() - start)
+        return accepted
+
+    slam.loop_detector.query = timed_query  # measure without touching the pipeline
+    for frame in dataset.frames():
+        slam.step(frame)
+    return slam, dataset.ground_truth.positions, query_times
+
+
+def _judge(slam: NeoSLAM, truth: np.ndarray, horizontal: bool) -> dict:
+    frames = np.array([k.frame_index for k in slam.loop_detector.index.keyframes])
+    positions = truth[:, :2] if horizontal else truth
+    return evaluate_closures(slam.loop_closures, positions, LoopCriteria(), frames).as_dict()
+
+
+def accuracy(name: str, trajectory: Path | None, seed: int, workdir: Path) -> dict:
+    config = simulation_config(load_config(environ={}), "vo", seed)
+    recording = record(config, trajectory=trajectory, fmt="kitti") if trajectory else record(config, route=name)
+    simulate_dataset(workdir / "data", recording, overwrite=True)
+    slam, truth, query_times = _drive(config, workdir / "data")
+    flat, full = _judge(slam, truth, horizontal=True), _judge(slam, truth, horizontal=False)
+    return {
+        "sequence": name,
+        "seed": seed,
+        "keyframes": len(slam.loop_detector.index),
+        "revisit_keyframes": flat["revisit_frames"],
+        "accepted": flat["accepted"],
+        "false_positive": flat["false_positive"],
+        "precision": flat["precision"],
+        "recall": flat["recall"],
+        "f1": flat["f1"],
+        "recall_at_full_precision": flat["recall_at_full_precision"],
+        "precision_3d": full["precision"],
+        "query_ms_median": 1e3 * statistics.median(query_times) if query_times else 0.0,
+        "_keyframes": list(slam.loop_detector.index.keyframes),
+        "_odometer": slam.keyframes.odometer_m,
+    }
+
+
+def _tiled(keyframes: list[Keyframe], copies: int) -> list[tuple[Keyframe, float]]:
+    """Copies of a drive's keyframes shifted far apart, with odometer readings as if driven one after another."""
+    spacing = 5.0
+    tiled = []
+    for copy in range(copies):
+        shift = np.eye(4)
+        shift[:2, 3] = [TILE_OFFSET_M * (copy % 4), TILE_OFFSET_M * (copy // 4)]
+        for k in keyframes:
+            moved = Keyframe(len(tiled), k.frame_index, shift @ k.pose, k.centers + shift[:3, 3], k.labels, k.patches)
+            tiled.append((moved, spacing * len(tiled)))
+    return tiled
+
+
+def _scrambled(keyframe: Keyframe, rng: np.random.Generator) -> Keyframe:
+    """The same objects at the same place, each moved a random 3-10 m: a layout that is nowhere in the map."""
+    angle = rng.uniform(0, 2 * np.pi, len(keyframe.labels))
+    radius = rng.uniform(3.0, 10.0, len(keyframe.labels))
+    moved = keyframe.centers + np.column_stack([radius * np.cos(angle), radius * np.sin(angle), 0 * angle])
+    return Keyframe(keyframe.id, keyframe.frame_index, keyframe.pose, moved, keyframe.labels, keyframe.patches)
+
+
+def query_speed(keyframes: list[Keyframe], sizes: list[int], queries: int) -> list[dict]:
+    config = load_config(environ={})
+    rows = []
+    stream = _tiled(keyframes, copies=int(np.ceil(max(sizes) / len(keyframes))) + 1)
+    rng = np.random.default_rng(0)
+    for size in sizes:
+        detector = LoopClosureDetector(config.keyframes, config.matching)
+        for keyframe, odometer in stream[:size]:
+            detector.add(keyframe, odometer)
+        odometer_now = stream[size - 1][1] + config.matching.exclude_recent_distance + 1.0
+        times: dict[str, list[float]] = {"revisit": [], "new": []}
+        eligible = []
+        for index in rng.integers(0, size, queries):
+            keyframe = stream[int(index)][0]
+            # A revisit stops at the first verified candidate; a new place matches every candidate and fails.
+            for kind, query in (("revisit", keyframe), ("new", _scrambled(keyframe, rng))):
+                start = time.perf_counter()
+                detector.relocalise(query, odometer_now)
+                times[kind].append(time.perf_counter() - start)
+            eligible.append(len(detector.index.eligible(keyframe.pose[:3, 3], odometer_now)))
+        rows.append(
+            {
+                "map_size": size,
+                "queries": queries,
+                "eligible_median": int(np.median(eligible)),
+                "revisit_ms_median": 1e3 * float(np.median(times["revisit"])),
+                "new_place_ms_median": 1e3 * float(np.median(times["new"])),
+                "query_ms_median": 1e3 * float(np.median(times["revisit"] + times["new"])),
+                "query_ms_p95": 1e3 * float(np.percentile(times["revisit"] + times["new"], 95)),
+            }
+        )
+    return rows
+
+
+def main() -> None:
+    args = parse_args(__doc__.splitlines()[0])
+    sequences = ["05", "08"] if args.quick else SEQUENCES
+    seeds = SEEDS[:1] if args.quick else SEEDS
+    runs = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for sequence in sequences:
+            poses = data_root() / "kitti" / "poses" / f"{sequence}.txt"
+            runs += [accuracy(sequence, poses, seed, Path(tmp)) for seed in seeds]
+        runs += [accuracy("town", None, seed, Path(tmp)) for seed in seeds]
+        keyframes_00 = next((r["_keyframes"] for r in runs if r["sequence"] == "00"), runs[0]["_keyframes"])
+    sizes = [s for s in MAP_SIZES if s <= 1000] if args.quick else MAP_SIZES
+    speed = query_speed(keyframes_00, sizes, QUERIES // 4 if args.quick else QUERIES)
+    columns = ["sequence", "seed", "keyframes", "revisit_keyframes", "accepted", "false_positive", "precision",
+               "recall", "f1", "recall_at_full_precision", "precision_3d", "query_ms_median"]  # fmt: skip
+    public = [{k: v for k, v in r.items() if not k.startswith("_")} for r in runs]
+    print("## (a) Loop closures on simulated drives (profile vo), judged within 5 m horizontally, 100 frames apart\n")
+    print(markdown_table(public, columns))
+    print("\n## (b) Query time (retrieval + matching + verification) against map size\n")
+    speed_columns = ["map_size", "queries", "eligible_median", "revisit_ms_median", "new_place_ms_median",
+                     "query_ms_median", "query_ms_p95"]  # fmt: skip
+    print(markdown_table(speed, speed_columns))
+    largest = speed[-1]
+    write_json(
+        args.json,
+        {
+            "query_ms_median": largest["query_ms_median"],
+            "map_sizes": [row["map_size"] for row in speed],
+            "speed": speed,
+            "accuracy": public,
+        },
+    )
+
+
+if __name__ == "__main__":
+    main()
