@@ -87,15 +87,17 @@ def simulate(
 def run_command(
     data: Annotated[Path | None, typer.Argument(help="Dataset folder; none runs the default scenario.")] = None,
     out: OutOption = Path("results"),
+    backend: Annotated[str | None, typer.Option(help="Map correction: relaxation or pose-graph.")] = None,
     config: ConfigOption = None,
     overwrite: OverwriteOption = False,
     quiet: QuietOption = False,
 ) -> None:
     """Run NeoSLAM on a dataset and write the results folder (trajectories, object map, metrics, plots)."""
-    from neoslam.jobs import run_dataset
+    from neoslam.jobs import run_dataset, with_backend
 
     try:
-        metrics = run_dataset(data, out, load_config(config), overwrite, progress=not quiet)
+        settings = with_backend(load_config(config), backend)
+        metrics = run_dataset(data, out, settings, overwrite, progress=not quiet)
     except (NeoSLAMError, OSError) as error:
         _fail(error)
     rows: list[tuple[str, Any]] = [("results", out), ("frames", metrics["frames"])]

@@ -286,7 +286,20 @@ class ExperienceMapConfig(_Section):
     mu_hdc: float = Field(1.0, ge=0, description="μ_hdc of eq. 17")
     correction_factor: float = Field(0.5, gt=0, le=1, description="c_f of eq. 18 (NeuroSLAM: 0.5)")
     correction_loops: int = Field(5, ge=0, description="relaxation passes per frame (NeuroSLAM: 5)")
-    backend: Literal["relaxation", "pose-graph"] = Field("relaxation", description="map correction back end")
+    backend: Literal["relaxation", "pose-graph"] = Field(
+        "pose-graph", description="map correction: the paper's relaxation (eq. 18), or GTSAM pose-graph optimisation"
+    )
+    odometry_sigma_per_root_metre: float = Field(
+        0.05, gt=0, description="pose graph: an odometry link's translation std is this times sqrt(metres), m"
+    )
+    odometry_yaw_sigma_per_root_metre: float = Field(
+        0.005, gt=0, description="pose graph: an odometry link's yaw std is this times sqrt(metres), rad"
+    )
+    odometry_sigma_floor: float = Field(0.01, gt=0, description="pose graph: least translation std of a link, m")
+    loop_sigma: float = Field(0.5, gt=0, description="pose graph: std of a loop link's translation, m")
+    loop_yaw_sigma: float = Field(0.02, gt=0, description="pose graph: std of a loop link's yaw, rad")
+    robust_kernel: Literal["huber", "cauchy", "none"] = Field("huber", description="pose graph: loop-link kernel")
+    robust_threshold: float = Field(3.0, gt=0, description="pose graph: kernel scale, in standard deviations")
 
 
 class ObjectMapConfig(_Section):

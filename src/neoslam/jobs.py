@@ -14,10 +14,12 @@ from neoslam.datasets.simulated import SimulatedDataset, is_simulated_dataset, r
 from neoslam.errors import ConfigError, InputError
 from neoslam.evaluation.report import cell_metrics, loop_metrics, timing_metrics, trajectory_metrics
 from neoslam.evaluation.trajectory_metrics import align, associate
+from neoslam.geometry import SimilarityTransform
 from neoslam.io.atomic import atomic_directory
 from neoslam.io.results import (
     read_loop_closures,
     write_config,
+    write_experience_map,
     write_loop_closures,
     write_metrics,
     write_object_vector_cells,
@@ -31,13 +33,22 @@ from neoslam.sim.simulator import SimulatedRecording, simulate
 from neoslam.types import Trajectory
 from neoslam.viz.plots import (
     plot_error_along_route,
+    plot_keyframe_labels,
     plot_map_2d,
     plot_map_3d,
     plot_matching_scores,
     plot_ovcn_loss,
 )
 
-__all__ = ["DEFAULT_ROUTE", "simulation_config", "record", "simulate_dataset", "run_dataset", "evaluate_files"]
+__all__ = [
+    "DEFAULT_ROUTE",
+    "simulation_config",
+    "with_backend",
+    "record",
+    "simulate_dataset",
+    "run_dataset",
+    "evaluate_files",
+]
 
 DEFAULT_ROUTE = "town"
 MIN_ALIGNMENT_POSES = 3  # Umeyama needs three points
@@ -53,6 +64,15 @@ def simulation_config(config: NeoSLAMConfig, noise: str | None, seed: int | None
     if seed is not None:
         update["seed"] = seed
     return config.model_copy(update={"simulator": config.simulator.model_copy(update=update)})
+
+
+def with_backend(config: NeoSLAMConfig, backend: str | None) -> NeoSLAMConfig:
+    """The config with another map-correction back end, if one is named."""
+    if backend is None:
+        return config
+    if backend not in ("relaxation", "pose-graph"):
+        raise ConfigError(f"unknown backend {backend!r}; choose relaxation or pose-graph")
+    return config.model_copy(update={"experience_map": config.experience_map.model_copy(update={"backend": backend})})
 
 
 def record(
@@ -102,6 +122,13 @@ def _metrics(dataset: SimulatedDataset, result: RunResult, config: NeoSLAMConfig
     keyframe_frames = np.array([k.frame_index for k in result.keyframes], dtype=int)
     metrics["loops"] = loop_metrics(result.loop_closures, truth, config.evaluation, keyframe_frames)
     metrics["keyframes"] = len(result.keyframes)
+    experience_map = result.experience_map
+    metrics["experience_map"] = {
+        "backend": experience_map.config.backend,
+        "experiences": len(experience_map.experiences),
+        "links": len(experience_map.graph.links),
+        "closures_rejected_by_grid_cells": len(experience_map.rejected_closures),
+    }
     metrics["hebbian_bytes"] = result.hebbian.nbytes
     metrics["objects"] = len(result.objects)
     metrics["cells"] = cell_metrics(result.cell_states, result.odometry, result.object_vector_cells)
@@ -122,17 +149,27 @@ def _plots(folder: Path, result: RunResult, truth: Trajectory | None, threshold:
             [c.query_keyframe for c in result.loop_closures if c.match_keyframe == result.recognised_keyframe],
         )
     estimates = {"odometry": result.odometry, "corrected": result.estimate}
-    if truth is None or len(truth) < MIN_ALIGNMENT_POSES:
-        plot_map_2d(folder / "map_2d.png", estimates, result.objects)
-        plot_map_3d(folder / "map_3d.png", estimates)
-        return
-    # Show the estimates where they best fit the truth (the same SE(3) alignment as the ATE).
-    aligned = {name: align(estimate, truth, "se3")[0] for name, estimate in estimates.items()}
-    transform = align(result.estimate, truth, "se3")[1]
-    objects = [replace(o, position=transform.apply_to_points(o.position[None])[0]) for o in result.objects]
-    plot_map_2d(folder / "map_2d.png", {"ground truth": truth, **aligned}, objects)
-    plot_map_3d(folder / "map_3d.png", {"ground truth": truth, **aligned})
-    plot_error_along_route(folder / "error_along_route.png", truth, aligned)
+    shown = SimilarityTransform(np.eye(3), np.zeros(3))
+    if truth is not None and len(truth) >= MIN_ALIGNMENT_POSES:
+        # Show the estimates where they best fit the truth (the same SE(3) alignment as the ATE).
+        shown = align(result.estimate, truth, "se3")[1]
+        estimates = {"ground truth": truth} | {name: align(e, truth, "se3")[0] for name, e in estimates.items()}
+        plot_error_along_route(
+            folder / "error_along_route.png", truth, {k: estimates[k] for k in ("odometry", "corrected")}
+        )
+    objects = [replace(o, position=shown.apply_to_points(o.position[None])[0]) for o in result.objects]
+    plot_map_2d(folder / "map_2d.png", estimates, objects)
+    plot_map_3d(folder / "map_3d.png", estimates)
+    if result.keyframes:
+        labels = np.concatenate([k.labels for k in result.keyframes])
+        points = np.concatenate([result.experience_map.corrected_points(k.id, k.centers) for k in result.keyframes])
+        corrected = shown.apply_to_poses(result.estimate.poses)
+        plot_keyframe_labels(
+            folder / "keyframe_labels.png",
+            Trajectory(result.estimate.timestamps, corrected),
+            labels,
+            shown.apply_to_points(points),
+        )
 
 
 def run_dataset(
@@ -154,6 +191,7 @@ def run_dataset(
         write_loop_closures(staging / "loop_closures.csv", result.loop_closures)
         write_objects(staging / "objects.csv", result.objects)
         write_object_vector_cells(staging, result.object_vector_cells)
+        write_experience_map(staging / "experience_map.json", result.experience_map)
         write_config(staging / "config.yaml", config)
         metrics = _metrics(dataset, result, config, wall_s)
         write_metrics(staging / "metrics.json", metrics)

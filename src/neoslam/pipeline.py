@@ -2,8 +2,8 @@
 
 Built so far: path integration in the head-direction and grid cells (paper 3.3, NeuroSLAM), object keyframes and
 loop closure by graph matching (3.2), the object-vector cells learning their firing field from keyframe objects
-(3.4), the Hebbian association of keyframes with the cells (3.5), and the object map. The estimate is still the
-odometry: the experience map (3.6) that corrects it at each loop plugs in here without changing the CLI.
+(3.4), the Hebbian association of keyframes with the cells (3.5), and the object experience map corrected at each
+loop (3.6), whose corrected trajectory is the estimate.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from neoslam.config import NeoSLAMConfig
 from neoslam.geometry import planar_motion
 from neoslam.loop.detector import LoopClosureDetector
 from neoslam.loop.keyframes import KeyframeBuilder
+from neoslam.mapping.experience_map import CellState, ExperienceMap
 from neoslam.mapping.object_map import MapObject, ObjectMap
 from neoslam.types import Frame, Keyframe, LoopClosure, Trajectory
 
@@ -28,8 +29,10 @@ __all__ = ["NeoSLAM", "RunResult", "run", "object_vectors"]
 
 @dataclass(frozen=True)
 class RunResult:
-    estimate: Trajectory  # corrected trajectory, one pose per input frame
+    estimate: Trajectory  # corrected trajectory of the final map, one pose per input frame
+    online_estimate: Trajectory  # the pose each step returned, with the map as it was then
     odometry: Trajectory
+    experience_map: ExperienceMap
     cell_states: np.ndarray  # (n, 4) decoded grid cells unwrapped to metres (x, y, z) and head direction (rad)
     objects: list[MapObject]
     keyframes: list[Keyframe]
@@ -59,7 +62,9 @@ class NeoSLAM:
         self.keyframes = KeyframeBuilder(config.keyframes)
         self.loop_detector = LoopClosureDetector(config.keyframes, config.matching)
         self.object_map = ObjectMap(config.object_map)
-        self.loop_closures: list[LoopClosure] = []
+        self.experience_map = ExperienceMap(config.experience_map, self.grid_cells.dims, config.head_direction.cells)
+        self.detected_closures: list[LoopClosure] = []  # accepted by the loop-closure detector
+        self.loop_closures: list[LoopClosure] = []  # and by the experience map's grid-cell check
         self._previous_odometry: np.ndarray | None = None
         self._grid_position = np.zeros(3)  # decoded grid-cell position unwrapped over the torus, metres
         self._grid_centre = self.grid_cells.centre
@@ -72,15 +77,25 @@ class NeoSLAM:
     def step(self, frame: Frame) -> np.ndarray:
         """Process one frame (the paper's steps in order); returns the current pose estimate T_world_robot."""
         travelled_m = self._integrate_path(frame)  # 3.3: head-direction and grid cells
-        pose = frame.odometry_pose  # 3.6 will correct this with the experience map
-        keyframe = self.keyframes.add(frame.index, pose, frame.observations, travelled_m)  # 3.2
+        odometry = frame.odometry_pose
+        keyframe = self.keyframes.add(frame.index, odometry, frame.observations, travelled_m)  # 3.2
+        cells = self._cell_state()
+        velocities = (frame.linear_velocity, frame.angular_velocity)
+        keyframe_id = keyframe.id if keyframe is not None else None
+        self.experience_map.step(frame.index, odometry, velocities, cells, travelled_m, keyframe_id)  # 3.6
         if keyframe is not None:
             self._learn_object_vectors(keyframe)  # 3.4
             self._associate(keyframe)  # 3.5
-            self._close_loop(keyframe)  # 3.2: matching against stored keyframes
-        self.object_map.add(pose, frame.observations)
+            self._close_loop(keyframe, cells)  # 3.2 matching, 3.6 loop links
+        self.experience_map.correct()  # 3.6: relaxation (eq. 18)
+        pose = self.experience_map.current_pose(odometry)
+        anchor, anchor_from_robot = self.experience_map.anchor(odometry)
+        self.object_map.add(pose, frame.observations, anchor, anchor_from_robot)
         self._record(frame, pose)
         return pose
+
+    def _cell_state(self) -> CellState:
+        return CellState(self.grid_cells.centre, self.head_direction.centre)
 
     def _integrate_path(self, frame: Frame) -> float:
         """Head-direction cells turn by the yaw change; grid cells move along the decoded heading (NeuroSLAM).
@@ -114,10 +129,34 @@ class NeoSLAM:
         if activity > 0:  # a silent template stores nothing (eq. 14 with O^k <= 0)
             self.hebbian.associate(keyframe.id, activity, self.grid_cells.activity, self.head_direction.activity)
 
-    def _close_loop(self, keyframe: Keyframe) -> None:
+    def _close_loop(self, keyframe: Keyframe, cells: CellState) -> None:
+        """Closures the detector accepts go to the experience map, which checks them against the cells; an
+        accepted one recalls the place's cell state from the Hebbian memory (local-view calibration)."""
         odometer = self.keyframes.odometer_m
-        self.loop_closures.extend(self.loop_detector.query(keyframe, odometer))
+        for closure in self.loop_detector.query(keyframe, odometer):
+            self.detected_closures.append(closure)
+            if self.experience_map.close_loop(closure, cells):
+                self.loop_closures.append(closure)
+                self._recall(closure)
         self.loop_detector.add(keyframe, odometer)
+
+    def _recall(self, closure: LoopClosure) -> None:
+        """Inject the stored keyframe's cell pattern, moved by the closure's offset (the robot is near, not at, the
+        stored place, and may face the other way)."""
+        if closure.match_keyframe not in self.hebbian:
+            return
+        recall = self.hebbian.recall(closure.match_keyframe)
+        if recall.strength <= 0:
+            return
+        stored_pose = self.loop_detector.index.keyframes[closure.match_keyframe].pose
+        offset_world = stored_pose[:3, :3] @ closure.relative_pose[:3, 3]
+        shift = np.round(offset_world / self.grid_cells.cell_size_m).astype(int)
+        gc_cells = (recall.gc_cells + shift) % np.asarray(self.grid_cells.dims)
+        self.grid_cells.inject_pattern(gc_cells, recall.gc_weights)
+        turn = float(np.arctan2(closure.relative_pose[1, 0], closure.relative_pose[0, 0]))
+        ring = self.config.head_direction.cells
+        hd_cells = (recall.hd_indices + int(round(turn / (2 * np.pi / ring)))) % ring
+        self.head_direction.inject_pattern(hd_cells, recall.hd_weights)
 
     def _record(self, frame: Frame, pose: np.ndarray) -> None:
         self._timestamps.append(frame.timestamp)
@@ -130,11 +169,14 @@ class NeoSLAM:
         stored = self.loop_detector.index.keyframes
         recognised = min((c.match_keyframe for c in self.loop_closures), default=None)
         empty = (np.empty(0), np.empty(0))
+        odometry = np.asarray(self._odometry).reshape(-1, 4, 4)
         return RunResult(
-            estimate=Trajectory(stamps, np.asarray(self._estimate).reshape(-1, 4, 4)),
-            odometry=Trajectory(stamps, np.asarray(self._odometry).reshape(-1, 4, 4)),
+            estimate=self.experience_map.trajectory(stamps, odometry),
+            online_estimate=Trajectory(stamps, np.asarray(self._estimate).reshape(-1, 4, 4)),
+            odometry=Trajectory(stamps, odometry),
+            experience_map=self.experience_map,
             cell_states=np.asarray(self._cell_states).reshape(-1, 4),
-            objects=self.object_map.objects(),
+            objects=self.object_map.objects(self.experience_map.graph.poses),
             keyframes=list(stored),
             loop_closures=list(self.loop_closures),
             recognised_keyframe=recognised,

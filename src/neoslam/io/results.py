@@ -15,8 +15,18 @@ from neoslam.io.trajectory_files import write_kitti, write_tum
 from neoslam.mapping.object_map import MapObject
 from neoslam.types import LoopClosure, Trajectory
 
-__all__ = ["LOOP_COLUMNS", "OBJECT_COLUMNS", "write_trajectories", "write_loop_closures", "write_objects",
-           "write_metrics", "write_config", "read_loop_closures", "write_object_vector_cells"]  # fmt: skip
+__all__ = [
+    "LOOP_COLUMNS",
+    "OBJECT_COLUMNS",
+    "write_trajectories",
+    "write_loop_closures",
+    "write_objects",
+    "write_metrics",
+    "write_config",
+    "read_loop_closures",
+    "write_object_vector_cells",
+    "write_experience_map",
+]
 
 LOOP_COLUMNS = (
     "query_frame", "match_frame", "query_keyframe", "match_keyframe", "score", "matched_objects",
@@ -54,6 +64,41 @@ def write_object_vector_cells(folder: Path, cells) -> None:
     cells.save(folder / "ovcn.pt")
     rows = [[epoch, f"{loss:.8f}"] for epoch, loss in enumerate(cells.loss_history, start=1)]
     write_table(folder / "ovcn_loss.csv", ("epoch", "loss"), rows)
+
+
+def _pose_record(pose: np.ndarray) -> dict[str, float]:
+    quaternion = quaternion_from_pose(pose[None])[0]
+    values = (*pose[:3, 3], *quaternion)
+    return {k: round(float(v), 6) for k, v in zip(("x", "y", "z", "qx", "qy", "qz", "qw"), values, strict=True)}
+
+
+def write_experience_map(path: Path, experience_map) -> None:
+    """experience_map.json: experiences (cells, corrected and odometry pose, keyframe) and links (eq. 15-16)."""
+    graph = experience_map.graph
+    experiences = [
+        {
+            "id": e.id,
+            "frame": e.frame_index,
+            "keyframe": e.keyframe_id,
+            "grid_cell": [round(float(v), 4) for v in e.grid_cell],
+            "head_direction_cell": round(float(e.head_direction), 4),
+            "pose": _pose_record(graph.poses[e.id]),
+            "odometry_pose": _pose_record(e.pose),
+        }
+        for e in experience_map.experiences
+    ]
+    links = [
+        {
+            "source": k.source,
+            "target": k.target,
+            "kind": k.kind,
+            "distance_m": round(k.distance_m, 4),
+            "relative": _pose_record(k.relative),
+        }  # fmt: skip
+        for k in graph.links
+    ]
+    payload = {"backend": experience_map.config.backend, "experiences": experiences, "links": links}
+    path.write_text(json.dumps(payload, separators=(",", ":")) + "\n")
 
 
 def write_metrics(path: Path, metrics: dict[str, Any]) -> None:

@@ -17,6 +17,8 @@ from neoslam.types import Keyframe, LoopClosure
 
 __all__ = ["LoopClosureDetector"]
 
+PASS_NEIGHBOURS = 3  # stored keyframes this close in id to a match belong to the same pass of a place
+
 
 @dataclass(frozen=True)
 class _Relocalisation:
@@ -53,15 +55,28 @@ class LoopClosureDetector:
         )
         return closure, relative[:3, 3]
 
+    def _ordered_candidates(self, keyframe: Keyframe, odometer_m: float, eligible: np.ndarray) -> list[int]:
+        """Retrieval candidates; when the previous keyframe relocalised, first the stored keyframes next to its
+        match: a place driven a third time then relocalises against one earlier pass, whose frame (and drift) the
+        consistency test compares, rather than hopping between passes."""
+        candidates = [int(c) for c in self.index.candidates(keyframe, odometer_m)]
+        previous = self._recent[-1] if self._recent else None
+        if previous is None or previous.keyframe_id != keyframe.id - 1:
+            return candidates
+        near = previous.closure.match_keyframe + np.arange(-PASS_NEIGHBOURS, PASS_NEIGHBOURS + 1)
+        preferred = [int(c) for c in near if c in set(eligible.tolist())]
+        return preferred + [c for c in candidates if c not in preferred]
+
     def relocalise(self, keyframe: Keyframe, odometer_m: float) -> _Relocalisation | None:
         """The first verified match among the retrieval candidates, moved to the stored keyframe nearest to the
         place the fit puts the robot (so it joins the same place, not a neighbour sharing the same objects)."""
         eligible = self.index.eligible(keyframe.pose[:3, 3], odometer_m)
-        for candidate in self.index.candidates(keyframe, odometer_m):
+        for candidate in self._ordered_candidates(keyframe, odometer_m, eligible):
             match = self._match(keyframe, int(candidate))
             if not match.verified:
                 continue
-            nearest = self.index.nearest((match.transform @ keyframe.pose)[:3, 3], eligible)
+            same_pass = eligible[np.abs(eligible - match.match) <= PASS_NEIGHBOURS]
+            nearest = self.index.nearest((match.transform @ keyframe.pose)[:3, 3], same_pass)
             if nearest != match.match:
                 match = self._match(keyframe, nearest)
                 if not match.verified:

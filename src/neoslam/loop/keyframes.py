@@ -45,10 +45,10 @@ class LocalObjectWindow:
     def add(self, pose: np.ndarray, observations: tuple[ObjectObservation, ...], odometer_m: float) -> None:
         """Fuse one frame's observations, seen from robot pose T_world_robot, and forget stale objects."""
         if observations:
-            centres = self._object_centres(observations)
-            world = transform_points(pose, camera_points_to_robot(centres))
-            # Stereo depth error grows with depth squared: weight each view by its inverse variance.
-            weights = 1.0 / (self.config.depth_sigma_at_1m * centres[:, 2] ** 2) ** 2
+            measured_depth = np.array([o.center_camera[2] for o in observations])
+            world = transform_points(pose, camera_points_to_robot(self._object_centres(observations)))
+            # Stereo depth error grows with the measured depth squared: weight each view by its inverse variance.
+            weights = 1.0 / (self.config.depth_sigma_at_1m * measured_depth**2) ** 2
             for observation, point, weight in zip(observations, world, weights, strict=True):
                 self._fuse(observation, point, float(weight), odometer_m)
         horizon = odometer_m - self.config.window_length
@@ -62,7 +62,7 @@ class LocalObjectWindow:
         surface = np.array([o.center_camera for o in observations])
         footprint = np.array([self.config.footprints.get(o.label, (0.0, 0.0)) for o in observations]) / 2
         bearing = np.arctan2(surface[:, 0], surface[:, 2])  # angle between the ray and the heading
-        with np.errstate(divide="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore"):
             radius = 1.0 / np.sqrt((np.cos(bearing) / footprint[:, 0]) ** 2 + (np.sin(bearing) / footprint[:, 1]) ** 2)
         radius = np.nan_to_num(radius)  # a class without a footprint is taken as a point
         return surface * (1.0 + radius / np.linalg.norm(surface, axis=1))[:, None]

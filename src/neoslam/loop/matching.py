@@ -79,10 +79,14 @@ def affinity_matrix(query: Keyframe, stored: Keyframe, candidates: np.ndarray, e
 
 def principal_eigenvector(affinity: np.ndarray) -> np.ndarray:
     """Power iteration from the all-ones vector: M is symmetric and non-negative, so the principal eigenvector is
-    non-negative (Perron-Frobenius) and converges in a few dozen products, far cheaper than a full eigensolver."""
+    non-negative (Perron-Frobenius) and converges in a few dozen products, far cheaper than a full eigensolver.
+    Iterating on M + I keeps the same eigenvectors and breaks the tie of eigenvalues +λ and −λ (a bipartite
+    consistency graph), on which plain iteration oscillates."""
+    if not affinity.any():  # no pair of assignments agrees: nothing to rank
+        return np.zeros(len(affinity))
     vector = np.full(len(affinity), 1.0 / np.sqrt(len(affinity)))
     for _ in range(POWER_ITERATIONS):
-        product = affinity @ vector
+        product = affinity @ vector + vector
         norm = np.linalg.norm(product)
         if norm == 0:
             return np.zeros_like(vector)

@@ -15,7 +15,14 @@ import numpy as np  # noqa: E402
 from neoslam.mapping.object_map import MapObject  # noqa: E402
 from neoslam.types import Trajectory  # noqa: E402
 
-__all__ = ["plot_map_2d", "plot_map_3d", "plot_error_along_route", "plot_ovcn_loss", "plot_matching_scores"]
+__all__ = [
+    "plot_map_2d",
+    "plot_map_3d",
+    "plot_keyframe_labels",
+    "plot_error_along_route",
+    "plot_ovcn_loss",
+    "plot_matching_scores",
+]
 
 DPI = 120
 STYLES = {
@@ -44,6 +51,20 @@ def plot_map_2d(path: Path, trajectories: dict[str, Trajectory], objects: list[M
     axes.set_aspect("equal", adjustable="datalim")
     axes.grid(alpha=0.3)
     axes.legend(loc="best", fontsize=8)
+    _save(figure, path)
+
+
+def plot_keyframe_labels(path: Path, trajectory: Trajectory, labels: np.ndarray, points: np.ndarray) -> None:
+    """The trajectory with the labels of the objects of its keyframes (Fig. 3c)."""
+    figure, axes = plt.subplots(figsize=(8, 7))
+    axes.plot(*trajectory.positions[:, :2].T, color="0.6", linewidth=1.0, label="trajectory")
+    for label in sorted(set(labels.tolist())):
+        chosen = labels == label
+        axes.plot(*points[chosen, :2].T, ".", markersize=4, color=LABEL_COLOURS.get(label, "grey"), label=label)
+    axes.set(xlabel="x [m]", ylabel="y [m]", title="Objects of the keyframes by label")
+    axes.set_aspect("equal", adjustable="datalim")
+    axes.grid(alpha=0.3)
+    axes.legend(loc="best", fontsize=8, markerscale=3)
     _save(figure, path)
 
 

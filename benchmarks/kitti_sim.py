@@ -1,0 +1,112 @@
+"""The whole NeoSLAM pipeline on simulated KITTI drives: odometry against the paper's relaxation and the pose graph.
+
+For each sequence, odometry noise profile and seed: `neoslam simulate` on the real KITTI ground truth, then
+`neoslam run` with each back end, plus the pose graph without the paper's grid-cell check of loop candidates (to
+show what that check costs under heavy drift). Loop closures are judged within 5 m horizontally, 100 frames apart.
+Runs go two at a time (the machine has two cores); timing columns are per run.
+
+    python benchmarks/kitti_sim.py [--quick] [--json FILE] [--sequences 05 08] [--profiles vo] [--seeds 1 2 3]
+"""
+
+from __future__ import annotations
+
+import statistics
+import sys
+import tempfile
+from multiprocessing import Pool
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
+from neoslam.config import load_config  # noqa: E402
+from neoslam.jobs import record, run_dataset, simulate_dataset, simulation_config, with_backend  # noqa: E402
+
+SEQUENCES = ["00", "02", "05", "06", "07", "08"]
+PROFILES = ["vo", "heavy"]
+SEEDS = [1, 2, 3]
+NO_CELL_CHECK = 1e9  # a grid-cell distance threshold that accepts every candidate
+
+
+def _arguments(parser) -> None:
+    parser.add_argument("--sequences", nargs="+", default=SEQUENCES)
+    parser.add_argument("--profiles", nargs="+", default=PROFILES)
+    parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
+
+
+def _without_cell_check(config):
+    experience_map = config.experience_map.model_copy(update={"gc_distance_threshold": NO_CELL_CHECK})
+    return config.model_copy(update={"experience_map": experience_map})
+
+
+def measure(job: tuple[str, str, int]) -> dict:
+    sequence, profile, seed = job
+    config = simulation_config(load_config(environ={}), profile, seed)
+    with tempfile.TemporaryDirectory() as tmp:
+        data = Path(tmp) / "data"
+        simulate_dataset(data, record(config, trajectory=data_root() / "kitti" / "poses" / f"{sequence}.txt"))
+        variants = {
+            "relaxation": with_backend(config, "relaxation"),
+            "pose_graph": with_backend(config, "pose-graph"),
+            "pose_graph_no_cell_check": _without_cell_check(with_backend(config, "pose-graph")),
+        }
+        metrics = {name: run_dataset(data, Path(tmp) / name, c, progress=False) for name, c in variants.items()}
+    graph = metrics["pose_graph"]
+    return {
+        "sequence": sequence,
+        "profile": profile,
+        "seed": seed,
+        "frames": graph["frames"],
+        "ate_odometry_m": graph["ate_rmse_m"]["odometry"],
+        "ate_relaxation_m": metrics["relaxation"]["ate_rmse_m"]["corrected"],
+        "ate_pose_graph_m": graph["ate_rmse_m"]["corrected"],
+        "ate_pose_graph_no_cell_check_m": metrics["pose_graph_no_cell_check"]["ate_rmse_m"]["corrected"],
+        "rpe_100m_pose_graph_m": graph["trajectory"]["corrected"]["rpe_translation_rmse_m"],
+        "kitti_t_percent_odometry": graph["trajectory"]["odometry"]["kitti_translation_percent"],
+        "kitti_t_percent_pose_graph": graph["trajectory"]["corrected"]["kitti_translation_percent"],
+        "loops_accepted": graph["loops"]["accepted"],
+        "loops_false": graph["loops"]["false_positive"],
+        "loop_precision": graph["loops"]["precision"],
+        "loop_recall": graph["loops"]["recall"],
+        "rejected_by_cells": graph["experience_map"]["closures_rejected_by_grid_cells"],
+        "loops_false_no_cell_check": metrics["pose_graph_no_cell_check"]["loops"]["false_positive"],
+        "fps": graph["timing"]["fps"],
+        "fps_relaxation": metrics["relaxation"]["timing"]["fps"],
+        "wall_s": graph["timing"]["wall_s"],
+        "ms_per_frame_median": graph["timing"]["ms_per_frame_median"],
+        "ms_per_frame_p95": graph["timing"]["ms_per_frame_p95"],
+    }
+
+
+def _medians(rows: list[dict], keys: list[str]) -> list[dict]:
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for row in rows:
+        groups.setdefault((row["sequence"], row["profile"]), []).append(row)
+    summary = []
+    for (sequence, profile), group in groups.items():
+        values = {k: statistics.median(r[k] for r in group if r[k] is not None) for k in keys}
+        summary.append({"sequence": sequence, "profile": profile, "seeds": len(group)} | values)
+    return summary
+
+
+def main() -> None:
+    args = parse_args(__doc__.splitlines()[0], _arguments)
+    sequences, seeds = (["05"], args.seeds[:1]) if args.quick else (args.sequences, args.seeds)
+    jobs = [(s, p, seed) for s in sequences for p in args.profiles for seed in seeds]
+    with Pool(2) as pool:
+        rows = pool.map(measure, jobs, chunksize=1)
+    columns = ["sequence", "profile", "seed", "frames", "ate_odometry_m", "ate_relaxation_m", "ate_pose_graph_m",
+               "ate_pose_graph_no_cell_check_m", "loops_accepted", "loops_false", "loop_precision", "loop_recall",
+               "rejected_by_cells", "loops_false_no_cell_check", "fps", "ms_per_frame_median",
+               "ms_per_frame_p95"]  # fmt: skip
+    print(markdown_table(rows, columns))
+    keys = ["ate_odometry_m", "ate_relaxation_m", "ate_pose_graph_m", "ate_pose_graph_no_cell_check_m",
+            "rpe_100m_pose_graph_m", "kitti_t_percent_odometry", "kitti_t_percent_pose_graph", "loop_precision",
+            "loop_recall", "fps", "wall_s", "ms_per_frame_median", "ms_per_frame_p95"]  # fmt: skip
+    medians = _medians(rows, keys)
+    print("\nMedian over seeds:\n")
+    print(markdown_table(medians, ["sequence", "profile", "seeds", *keys]))
+    write_json(args.json, {"rows": rows, "medians": medians})
+
+
+if __name__ == "__main__":
+    main()

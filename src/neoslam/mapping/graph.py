@@ -1,0 +1,58 @@
+"""The graph both map back ends correct: nodes are experiences' poses, links are relative poses between them."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from neoslam.geometry import invert_pose
+
+__all__ = ["Link", "MapGraph"]
+
+LinkKind = Literal["odometry", "loop"]
+
+
+@dataclass(frozen=True, slots=True)
+class Link:
+    """A measured relative pose T_source_target between two experiences."""
+
+    source: int
+    target: int
+    relative: np.ndarray  # (4, 4)
+    kind: LinkKind
+    distance_m: float  # travelled along an odometry link (its uncertainty grows with it); 0 for a loop link
+
+
+@dataclass
+class MapGraph:
+    """Experience poses T_world_robot (n, 4, 4), corrected in place by a back end, and their links."""
+
+    poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 4)))
+    links: list[Link] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.poses)
+
+    def add_node(self, pose: np.ndarray) -> int:
+        self.poses = np.concatenate([self.poses, pose[None]])
+        return len(self.poses) - 1
+
+    def add_link(self, link: Link) -> None:
+        if not (0 <= link.source < len(self) and 0 <= link.target < len(self)):
+            raise IndexError(f"link {link.source} -> {link.target} names a node outside 0..{len(self) - 1}")
+        self.links.append(link)
+
+    def link_residuals(self) -> np.ndarray:
+        """Per link, the translation (m) between where the target is and where the link puts it."""
+        if not self.links:
+            return np.zeros(0)
+        sources = np.array([link.source for link in self.links])
+        targets = np.array([link.target for link in self.links])
+        relatives = np.array([link.relative for link in self.links])
+        predicted = self.poses[sources] @ relatives
+        return np.linalg.norm(predicted[:, :3, 3] - self.poses[targets][:, :3, 3], axis=1)
+
+    def relative(self, source: int, target: int) -> np.ndarray:
+        return invert_pose(self.poses[source]) @ self.poses[target]

@@ -1,0 +1,274 @@
+"""Loop-closure detection: a street driven twice, built by hand; then simulated routes (the block route through
+the whole pipeline, the town route's repeated layout through the keyframes and the detector)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from neoslam.config import EvaluationConfig, KeyframeConfig, MatchingConfig, NeoSLAMConfig, SimulatorConfig
+from neoslam.datasets.simulated import read_dataset, write_dataset
+from neoslam.evaluation.loops import LoopCriteria, evaluate_closures
+from neoslam.geometry import invert_pose, planar_motion, rotation_angle, transform_points
+from neoslam.loop.detector import LoopClosureDetector
+from neoslam.loop.keyframes import KeyframeBuilder
+from neoslam.loop.matching import match_keyframes
+from neoslam.pipeline import run
+from neoslam.sim.routes import ROUTES
+from neoslam.sim.simulator import simulate_route
+
+KEYFRAMES = KeyframeConfig()
+MATCHING = MatchingConfig()
+CAMERA_HEIGHT = 1.65
+REACH = 15.0  # a hand-made keyframe holds the objects within this distance along the street
+FIRST_PASS = np.arange(0.0, 101.0, 5.0)  # a stored keyframe every 5 m along x
+SECOND_PASS_ODOMETER = 400.0  # round the block and back
+
+
+class TwoPasses:
+    """A street on the x axis with objects on both sides; the first pass stores keyframes with the true poses, the
+    second comes back later with drifted odometry D (estimate = D @ truth, for the poses and the objects)."""
+
+    def __init__(self, make_street, make_keyframe, make_yaw_pose, seed: int = 0) -> None:
+        self.rng = np.random.default_rng(seed)
+        self.street = make_street(self.rng, count=60, length=140.0)
+        self.street.centers[:, 0] -= 20.0  # objects from x = -20 to 120
+        self.make_keyframe = make_keyframe
+        self.yaw_pose = make_yaw_pose
+        self.next_id = 0
+
+    def keyframe(self, true_pose: np.ndarray, drift: np.ndarray, frame: int, street=None):
+        street = street or self.street
+        near = np.flatnonzero(np.abs(street.centers[:, 0] - true_pose[0, 3]) <= REACH)
+        centres = transform_points(drift, street.centers[near]) + self.rng.normal(0, 0.1, (len(near), 3))
+        keyframe = self.make_keyframe(
+            centres,
+            [street.labels[i] for i in near],
+            street.patches(self.rng, near),
+            pose=drift @ true_pose,
+            id=self.next_id,
+            frame_index=frame,
+        )
+        self.next_id += 1
+        return keyframe
+
+    def first_pass(self, detector: LoopClosureDetector) -> list[np.ndarray]:
+        poses = []
+        for i, x in enumerate(FIRST_PASS):
+            pose = self.yaw_pose(0.0, (x, 0.0, CAMERA_HEIGHT))
+            keyframe = self.keyframe(pose, np.eye(4), frame=10 * i)
+            assert detector.query(keyframe, 5.0 * i) == []  # nothing old enough to close a loop with
+            detector.add(keyframe, 5.0 * i)
+            poses.append(pose)
+        return poses
+
+    def second_pass_pose(self, x: float, yaw: float = 0.0, offset=(0.5, 0.8, 0.0)) -> np.ndarray:
+        return self.yaw_pose(yaw, (x + offset[0], offset[1], CAMERA_HEIGHT + offset[2]))
+
+
+def _stored_at(x: float) -> int:
+    """The first-pass keyframe made at x."""
+    return int(np.argmin(np.abs(FIRST_PASS - x)))
+
+
+DRIFT_YAW, DRIFT = np.radians(3.0), (2.0, -1.5, 0.0)
+
+
+def _second_pass(
+    passes: TwoPasses, detector, xs, drifts=None, yaw=0.0, offset=(0.5, 0.8, 0.0), skip=(), start=SECOND_PASS_ODOMETER
+):
+    """Query and store a keyframe at each x; returns the closures accepted at each, and the true poses."""
+    accepted, truths = [], []
+    for j, x in enumerate(xs):
+        drift = passes.yaw_pose(DRIFT_YAW, DRIFT) if drifts is None else drifts[j]
+        true_pose = passes.second_pass_pose(x, yaw, offset)
+        if j in skip:
+            passes.next_id += 1  # a keyframe the detector never hears of
+        odometer = start + 5.0 * j
+        keyframe = passes.keyframe(true_pose, drift, frame=int(1000 + 10 * (start - SECOND_PASS_ODOMETER) + 10 * j))
+        accepted.append(detector.query(keyframe, odometer))
+        detector.add(keyframe, odometer)
+        truths.append(true_pose)
+    return accepted, truths
+
+
+@pytest.fixture
+def passes(make_street, make_keyframe, make_yaw_pose) -> TwoPasses:
+    return TwoPasses(make_street, make_keyframe, make_yaw_pose)
+
+
+@pytest.mark.parametrize("yaw", [0.0, np.pi], ids=["same-direction", "opposite-direction"])
+def test_a_revisit_is_accepted_once_two_keyframes_agree(passes: TwoPasses, yaw: float) -> None:
+    detector = LoopClosureDetector(KEYFRAMES, MATCHING)
+    stored_poses = passes.first_pass(detector)
+    xs = np.arange(20.0, 81.0, 5.0)
+    accepted, truths = _second_pass(passes, detector, xs, yaw=yaw)
+
+    # The first relocalisation waits; the second confirms it and both are accepted; then one each.
+    first_query = len(FIRST_PASS)
+    assert [[c.query_keyframe for c in closures] for closures in accepted] == [
+        [],
+        [first_query, first_query + 1],
+        *[[first_query + j] for j in range(2, len(xs))],
+    ]
+    closures = [c for group in accepted for c in group]
+    for c, x, true_pose in zip(closures, xs, truths, strict=True):
+        stored = _stored_at(x)  # the same place (the robot is 0.9 m off it)
+        assert (c.match_keyframe, c.match_frame) == (stored, 10 * stored)
+        assert c.query_frame == 1000 + 10 * (c.query_keyframe - first_query)
+        assert c.n_matches >= MATCHING.min_inliers and c.score > MATCHING.score_threshold
+        # relative_pose is T_stored_query: the true second-pass pose seen from the stored one, drift undone.
+        expected = invert_pose(stored_poses[stored]) @ true_pose
+        np.testing.assert_allclose(c.relative_pose[:3, 3], expected[:3, 3], atol=0.25)
+        assert np.degrees(rotation_angle(c.relative_pose[:3, :3].T @ expected[:3, :3])) < 1.0
+
+
+def test_an_isolated_relocalisation_is_not_accepted(passes: TwoPasses, make_street) -> None:
+    detector = LoopClosureDetector(KEYFRAMES, MATCHING)
+    passes.first_pass(detector)
+    elsewhere = make_street(np.random.default_rng(99), count=60, length=140.0)  # other objects, other looks
+    xs = np.arange(20.0, 81.0, 5.0)
+    accepted = []
+    for j, x in enumerate(xs):
+        keyframe = passes.keyframe(
+            passes.second_pass_pose(x), passes.yaw_pose(DRIFT_YAW, DRIFT), 1000 + j, None if j % 2 == 0 else elsewhere
+        )
+        if j % 2 == 0:  # the revisited street relocalises, on its own
+            assert detector.relocalise(keyframe, SECOND_PASS_ODOMETER + 5.0 * j) is not None
+        accepted += detector.query(keyframe, SECOND_PASS_ODOMETER + 5.0 * j)
+        detector.add(keyframe, SECOND_PASS_ODOMETER + 5.0 * j)
+    assert accepted == []
+
+
+def test_relocalisations_of_keyframes_that_are_not_consecutive_are_not_accepted(passes: TwoPasses) -> None:
+    detector = LoopClosureDetector(KEYFRAMES, MATCHING)
+    passes.first_pass(detector)
+    accepted, _ = _second_pass(passes, detector, [30.0, 35.0, 40.0], skip={1, 2})
+    assert accepted == [[], [], []]
+
+
+@pytest.mark.parametrize(("consistent_distance", "accepted"), [(MATCHING.consistent_distance, 0), (4.0, 9)])
+def test_consecutive_relocalisations_must_agree(passes: TwoPasses, consistent_distance: float, accepted: int) -> None:
+    # Every other keyframe fits 3 m further along the street: each relocalises at the right place, but no two
+    # consecutive ones agree on the transform (what a repeated pattern does).
+    config = MATCHING.model_copy(update={"consistent_distance": consistent_distance})
+    detector = LoopClosureDetector(KEYFRAMES, config)
+    passes.first_pass(detector)
+    drift = passes.yaw_pose(DRIFT_YAW, DRIFT)
+    shifted = passes.yaw_pose(0.0, (3.0, 0.0, 0.0)) @ drift
+    xs = np.arange(30.0, 71.0, 5.0)
+    closures, _ = _second_pass(passes, detector, xs, drifts=[drift if j % 2 else shifted for j in range(len(xs))])
+    assert sum(len(c) for c in closures) == accepted
+
+
+@pytest.mark.parametrize(
+    ("offset", "gate"),
+    [((0.5, 6.0, 0.0), "max_place_offset"), ((0.5, 0.8, 7.0), "max_vertical_offset")],
+    ids=["beside", "above"],
+)
+def test_a_fit_that_puts_the_robot_elsewhere_is_rejected(make_street, make_keyframe, make_yaw_pose, offset, gate):
+    # The second pass drives 6 m beside the first (a parallel lane) or 7 m above it (a bridge), seeing the same
+    # objects: the fit is right, and says the robot is not at a stored place.
+    for limit, expected in [(getattr(MATCHING, gate), 0), (8.0, 7)]:
+        passes = TwoPasses(make_street, make_keyframe, make_yaw_pose)
+        detector = LoopClosureDetector(KEYFRAMES, MATCHING.model_copy(update={gate: limit}))
+        passes.first_pass(detector)
+        closures, _ = _second_pass(passes, detector, np.arange(30.0, 61.0, 5.0), offset=offset)
+        assert sum(len(c) for c in closures) == expected
+
+
+def test_a_third_visit_is_accepted_like_the_second(passes: TwoPasses) -> None:
+    detector = LoopClosureDetector(KEYFRAMES, MATCHING)
+    passes.first_pass(detector)
+    xs = np.arange(0.0, 101.0, 5.0)
+    second, _ = _second_pass(passes, detector, xs, drifts=[passes.yaw_pose(np.radians(2), (3, -3, 0))] * len(xs))
+    assert sum(map(len, second)) == len(xs)
+    third_drift = [passes.yaw_pose(np.radians(-2), (-3, 3, 0))] * len(xs)
+    third, _ = _second_pass(passes, detector, xs, drifts=third_drift, start=SECOND_PASS_ODOMETER + 400.0)
+    assert sum(map(len, third)) == len(xs)
+
+
+def test_scores_against_every_stored_keyframe_peak_at_the_same_place(passes: TwoPasses) -> None:
+    detector = LoopClosureDetector(KEYFRAMES, MATCHING)
+    passes.first_pass(detector)
+    query = passes.keyframe(passes.second_pass_pose(50.0, yaw=np.pi), passes.yaw_pose(DRIFT_YAW, DRIFT), 1000)
+    spectral, verified = detector.scores(query)
+    assert spectral.shape == verified.shape == (len(FIRST_PASS),)
+    same_place = _stored_at(50.0)
+    assert int(np.argmax(spectral)) == int(np.argmax(verified)) == same_place
+    assert (spectral >= 0).all() and (verified <= spectral + 1e-9).all()
+    far = np.abs(FIRST_PASS - 50.0) > 2 * REACH  # no object in common: never verified
+    assert (verified[far] == 0).all() and verified[same_place] > 0
+
+
+# -------------------------------------------------------------------------------------------------------- pipeline
+
+
+def _judged(closures, truth_positions: np.ndarray):
+    """Precision and recall against the truth, the way the evaluation judges a run (horizontal by default)."""
+    evaluation = EvaluationConfig()
+    criteria = LoopCriteria(evaluation.loop_max_distance, evaluation.loop_min_frame_gap)
+    positions = truth_positions[:, :2] if evaluation.loop_distance == "horizontal" else truth_positions
+    return evaluate_closures(closures, positions, criteria)
+
+
+def _run_route(name: str, seed: int, folder: Path):
+    write_dataset(folder, simulate_route(name, SimulatorConfig(seed=seed)))
+    dataset = read_dataset(folder)
+    return dataset, run(dataset.frames(), NeoSLAMConfig(), total=len(dataset), progress=False)
+
+
+def test_the_block_route_closes_loops_with_full_precision(tmp_path: Path) -> None:
+    dataset, result = _run_route("block", 11, tmp_path / "block")
+    assert len(result.loop_closures) >= 5
+    assert _judged(result.loop_closures, dataset.ground_truth.positions).precision == 1.0
+    keyframe_ids = [c.query_keyframe for c in result.loop_closures]
+    assert len(set(keyframe_ids)) == len(keyframe_ids)  # each keyframe closes at most one loop
+
+
+def _detected_closures(dataset) -> tuple[list, list]:
+    """Keyframes and the closures the loop detector accepts, with the keyframes and the detector driven the way
+    the pipeline drives them (odometry poses, odometer of planar motion), but without the rest of the pipeline."""
+    builder, detector = KeyframeBuilder(KEYFRAMES), LoopClosureDetector(KEYFRAMES, MATCHING)
+    closures, previous = [], None
+    for frame in dataset.frames():
+        horizontal, _, vertical = planar_motion(
+            frame.odometry_pose if previous is None else previous, frame.odometry_pose
+        )
+        previous = frame.odometry_pose
+        keyframe = builder.add(
+            frame.index, frame.odometry_pose, frame.observations, float(np.hypot(horizontal, vertical))
+        )
+        if keyframe is not None:
+            closures += detector.query(keyframe, builder.odometer_m)
+            detector.add(keyframe, builder.odometer_m)
+    return detector.index.keyframes, closures
+
+
+def test_the_town_route_is_not_fooled_by_its_repeated_layout(tmp_path: Path) -> None:
+    write_dataset(tmp_path / "town", simulate_route("town", SimulatorConfig(seed=0)))
+    dataset = read_dataset(tmp_path / "town")
+    keyframes, closures = _detected_closures(dataset)
+    repeat = ROUTES["town"].repeats[0]
+    xy = dataset.ground_truth.positions[:, :2]
+
+    def near(start, heading) -> np.ndarray:
+        offset = xy - np.asarray(start)
+        along = offset @ [np.cos(heading), np.sin(heading)]
+        across = offset @ [-np.sin(heading), np.cos(heading)]
+        return (along > -20.0) & (along < repeat.length + 20.0) & (np.abs(across) < 20.0)
+
+    source, target = near(repeat.source_start, repeat.source_heading), near(repeat.target_start, repeat.target_heading)
+    # The trap is real: keyframes of the target stretch do verify against keyframes of the source stretch.
+    on_source = [k for k in keyframes if source[k.frame_index]]
+    on_target = [k for k in keyframes if target[k.frame_index]]
+    assert len(on_source) > 10 and len(on_target) > 10
+    assert any(match_keyframes(q, s, MATCHING, KEYFRAMES.e_max).verified for q in on_target[::3] for s in on_source)
+    # Loops are closed elsewhere, all of them right, and none joins the two stretches.
+    assert len(closures) >= 20
+    assert _judged(closures, dataset.ground_truth.positions).precision == 1.0
+    for c in closures:
+        q, m = c.query_frame, c.match_frame
+        assert not (source[q] and target[m]) and not (target[q] and source[m]), (q, m)

@@ -1,0 +1,259 @@
+"""Keyframe matching (paper eq. 2-5): candidates, affinity, spectral matching and the verified rigid fit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from neoslam.config import KeyframeConfig, MatchingConfig
+from neoslam.geometry import fit_yaw_translation, invert_pose, transform_points, yaw_of
+from neoslam.loop.matching import (
+    affinity_matrix,
+    candidate_assignments,
+    match_keyframes,
+    principal_eigenvector,
+    spectral_matching,
+)
+
+CONFIG = MatchingConfig()
+E_MAX = KeyframeConfig().e_max
+
+
+def _grey(*levels: float) -> np.ndarray:
+    return np.array([np.full((16, 16), level) for level in levels], dtype=np.uint8)
+
+
+def _wrap(angle: float) -> float:
+    return float((angle + np.pi) % (2 * np.pi) - np.pi)
+
+
+# ------------------------------------------------------------------------------------------------------- candidates
+
+
+def test_candidates_pair_equal_labels_with_similar_patches(make_keyframe) -> None:
+    threshold = CONFIG.appearance_rmse_threshold
+    assert threshold == 80.0
+    # Plain patches: the RMSE between two of them is the difference of their grey levels.
+    query = make_keyframe(np.zeros((3, 3)), ["car", "car", "person"], _grey(100, 100, 50))
+    stored = make_keyframe(np.zeros((4, 3)), ["car", "person", "car", "truck"], _grey(180, 130, 181, 100))
+    pairs = candidate_assignments(query, stored, CONFIG)
+    # car-car: RMSE 80 passes (<= threshold), 81 does not; person-person: 80; the truck matches nothing.
+    np.testing.assert_array_equal(pairs, [[0, 0], [1, 0], [2, 1]])
+    strict = CONFIG.model_copy(update={"appearance_rmse_threshold": 79.0})
+    np.testing.assert_array_equal(candidate_assignments(query, stored, strict), np.empty((0, 2)))
+
+
+def test_candidates_use_the_rmse_over_the_whole_patch(make_keyframe) -> None:
+    rng = np.random.default_rng(3)
+    base = rng.integers(0, 256, (16, 16))
+    # Half the pixels off by 112 and half by 0: RMSE = 112 / sqrt(2) = 79.2.
+    shifted = base.copy()
+    shifted[:8] = np.clip(base[:8] + np.where(base[:8] < 128, 112, -112), 0, 255)
+    query = make_keyframe(np.zeros((1, 3)), ["car"], base[None].astype(np.uint8))
+    stored = make_keyframe(np.zeros((1, 3)), ["car"], shifted[None].astype(np.uint8))
+    rmse = np.sqrt(np.mean((base.astype(float) - shifted) ** 2))
+    assert 79 < rmse < 80
+    assert len(candidate_assignments(query, stored, CONFIG)) == 1
+    tight = CONFIG.model_copy(update={"appearance_rmse_threshold": 79.0})
+    assert len(candidate_assignments(query, stored, tight)) == 0
+
+
+# --------------------------------------------------------------------------------------------------------- affinity
+
+
+def test_affinity_is_equations_2_and_4_by_hand(make_keyframe) -> None:
+    query = make_keyframe([[0, 0, 0], [1, 0, 0], [0, 2, 0]], ["car"] * 3)  # e_01 = 1, e_02 = 2, e_12 = sqrt 5
+    stored = make_keyframe([[10, 0, 0], [10, 1.2, 0], [13, 0, 0]], ["car"] * 3)  # 1.2, 3, sqrt 10.44
+    candidates = np.array([(i, j) for i in range(3) for j in range(3)])
+    affinity = affinity_matrix(query, stored, candidates, E_MAX)
+
+    def entry(a: tuple[int, int], b: tuple[int, int]) -> float:
+        return affinity[candidates.tolist().index(list(a)), candidates.tolist().index(list(b))]
+
+    assert entry((0, 0), (1, 1)) == pytest.approx(1.5 - abs(1.0 - 1.2))  # 1.3
+    assert entry((0, 0), (2, 2)) == pytest.approx(1.5 - abs(2.0 - 3.0))  # 0.5
+    assert entry((1, 1), (2, 2)) == pytest.approx(1.5 - abs(np.sqrt(5) - np.sqrt(10.44)))
+    assert entry((0, 1), (1, 2)) == 0.0  # |1 - 3.231| > e_max: clipped at 0
+    assert entry((0, 0), (0, 1)) == 0.0  # query object 0 cannot match two stored objects
+    assert entry((0, 2), (1, 2)) == 0.0  # stored object 2 cannot match two query objects
+    # The whole matrix, entry by entry.
+    for a, (i, ii) in enumerate(candidates):
+        for b, (j, jj) in enumerate(candidates):
+            conflict = i == j or ii == jj
+            e_q = np.linalg.norm(query.centers[i] - query.centers[j])
+            e_s = np.linalg.norm(stored.centers[ii] - stored.centers[jj])
+            expected = 0.0 if conflict else max(0.0, E_MAX - abs(e_q - e_s))
+            assert affinity[a, b] == pytest.approx(expected, abs=1e-12)
+    np.testing.assert_array_equal(affinity, affinity.T)
+
+
+# ---------------------------------------------------------------------------------------------------- eigenvector
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_principal_eigenvector_is_that_of_eigh(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(3, 40))
+    matrix = rng.uniform(0, 1.5, (n, n)) * (rng.random((n, n)) < 0.6)
+    matrix = np.triu(matrix, 1)
+    matrix = matrix + matrix.T
+    vector = principal_eigenvector(matrix)
+    expected = np.linalg.eigh(matrix)[1][:, -1]
+    expected *= np.sign(expected.sum())
+    assert (vector >= 0).all()
+    np.testing.assert_allclose(np.linalg.norm(vector), 1.0)
+    np.testing.assert_allclose(vector, expected, atol=1e-6)
+
+
+def test_principal_eigenvector_of_nothing_is_zero() -> None:
+    np.testing.assert_array_equal(principal_eigenvector(np.zeros((4, 4))), np.zeros(4))
+
+
+def test_principal_eigenvector_of_a_bipartite_affinity() -> None:
+    matrix = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.4], [0.0, 0.4, 0.0]])
+    expected = np.abs(np.linalg.eigh(matrix)[1][:, -1])  # (0.66, 0.71, 0.26)
+    np.testing.assert_allclose(principal_eigenvector(matrix), expected, atol=1e-6)
+
+
+# ------------------------------------------------------------------------------------------------ spectral matching
+
+
+def _query_of(street, rng, keep, motion, noise=0.2, extras=2):
+    """The street's objects `keep`, shuffled, moved by `motion`, with noise; plus unrelated `extras`. Returns the
+    query's centres, labels and patches and, for each query object, its stored index (-1 for extras)."""
+    order = rng.permutation(keep)
+    centres = transform_points(motion, street.centers[order]) + rng.normal(0, noise, (len(order), 3))
+    labels = [street.labels[i] for i in order]
+    patches = street.patches(rng, order)
+    truth = order.tolist()
+    if extras:
+        centre = transform_points(motion, street.centers.mean(0, keepdims=True))[0]
+        extra = centre + np.column_stack([rng.uniform(-20, 20, extras), rng.uniform(-8, 8, extras), np.zeros(extras)])
+        source = rng.choice(len(street.labels), extras)
+        centres = np.vstack([centres, extra])
+        labels += [street.labels[i] for i in source]
+        patches = np.concatenate([patches, street.patches(rng, source)])
+        truth += [-1] * extras
+    return centres, labels, patches, np.array(truth)
+
+
+@pytest.mark.parametrize("yaw_deg", [0.0, 37.0, 180.0, -100.0])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_permuted_moved_noisy_copy_is_matched(make_keyframe, make_street, make_yaw_pose, yaw_deg, seed) -> None:
+    rng = np.random.default_rng(seed)
+    street = make_street(rng, count=10, length=40.0)
+    stored = make_keyframe(street.centers, street.labels, street.patches(rng, range(10)), id=3)
+    motion = make_yaw_pose(np.radians(yaw_deg), (250.0, -80.0, 1.0))  # query world = motion @ stored world
+    keep = rng.choice(10, 8, replace=False)  # two objects dropped, two unrelated ones added
+    centres, labels, patches, truth = _query_of(street, rng, keep, motion)
+    query = make_keyframe(centres, labels, patches, id=9)
+
+    assert len(candidate_assignments(query, stored, CONFIG)) > len(labels)  # appearance alone is ambiguous
+    match = match_keyframes(query, stored, CONFIG, E_MAX)
+    assert match.verified and (match.query, match.match) == (9, 3)
+    assert sorted(map(tuple, match.pairs.tolist())) == sorted((q, s) for q, s in enumerate(truth) if s >= 0)
+    # The transform takes the query's world to the stored one: the inverse of the motion.
+    yaw_error = _wrap(yaw_of(match.transform) - yaw_of(invert_pose(motion)))
+    assert abs(np.degrees(yaw_error)) < 1.5
+    np.testing.assert_allclose(
+        match.transform @ motion @ np.append(street.centers.mean(0), 1), np.append(street.centers.mean(0), 1), atol=0.3
+    )
+    assert match.residual_rms < 0.45
+    assert match.n_matches == 8
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_unrelated_objects_are_not_verified(make_keyframe, make_street, seed: int) -> None:
+    rng = np.random.default_rng(100 + seed)
+    street = make_street(rng, count=12, length=50.0)
+    stored = make_keyframe(street.centers, street.labels, street.patches(rng, range(12)))
+    other = make_street(rng, count=12, length=50.0)
+    # Same classes and the same looks as the stored objects, but elsewhere: only geometry can tell.
+    query = make_keyframe(other.centers, street.labels, street.patches(rng, range(12)))
+    assert len(candidate_assignments(query, stored, CONFIG)) >= 12
+    match = match_keyframes(query, stored, CONFIG, E_MAX)
+    assert not match.verified and match.verified_score == 0.0
+
+
+def test_one_gross_outlier_does_not_drag_the_fit(make_keyframe, make_yaw_pose) -> None:
+    rng = np.random.default_rng(7)
+    # Stored world: four cars on the left kerb (y = 5 exactly), four people on the right, and a bicycle decoy.
+    left = np.column_stack([[0, 7, 15, 24], np.full(4, 5.0), np.zeros(4)])
+    right = np.column_stack([[3, 11, 19, 28], [-5.5, -4.8, -6.0, -5.2], np.zeros(4)])
+    bicycle = np.array([20.0, -5.0, 0.0])  # where the query's bicycle truly is; no such object is stored...
+    decoy = bicycle * [1, -1, 1] + [0, 10, 0]  # ...but a bicycle at its mirror image across the left kerb is
+    stored_centres = np.vstack([left, right, decoy])
+    labels = ["car"] * 4 + ["person"] * 4 + ["bicycle"]
+    stored = make_keyframe(stored_centres, labels)
+    motion = make_yaw_pose(np.radians(60.0), (40.0, 10.0, 0.0))
+    query_centres = transform_points(motion, np.vstack([left, right, bicycle])) + rng.normal(0, 0.05, (9, 3))
+    query = make_keyframe(query_centres, labels)
+
+    # The mirror image keeps the distances to every car: the wrong pair is chosen, and well supported.
+    candidates = candidate_assignments(query, stored, CONFIG)
+    affinity = affinity_matrix(query, stored, candidates, E_MAX)
+    chosen = spectral_matching(affinity, candidates)
+    wrong = int(np.flatnonzero((candidates == [8, 8]).all(1))[0])
+    assert wrong in chosen and (affinity[wrong, chosen] > 0).sum() >= 4
+    # Least squares on all nine pairs is dragged off by the wrong one...
+    everything = fit_yaw_translation(query_centres, stored_centres)
+    residual = np.linalg.norm(transform_points(everything, query_centres)[:, :2] - stored_centres[:, :2], axis=1)
+    assert np.sqrt(np.mean(residual**2)) > CONFIG.max_fit_residual and residual[:8].max() > CONFIG.inlier_distance
+    # ...the trimmed fit drops it and recovers the motion.
+    match = match_keyframes(query, stored, CONFIG, E_MAX)
+    assert match.verified
+    assert sorted(map(tuple, match.pairs.tolist())) == [(i, i) for i in range(8)]
+    np.testing.assert_allclose(match.transform @ motion, np.eye(4), atol=0.1)
+    assert match.residual_rms < 0.15
+    # The spectral score counted the wrong pair's support; the verified score, over the eight right pairs, does not.
+    assert match.verified_score == pytest.approx(8 * 7, rel=0.05) and match.verified_score < match.score - 3
+
+
+def _copy(make_keyframe, make_street, rng, count, shared, motion_yaw=0.5):
+    """A stored street of `count` objects and a query sharing the first `shared` of them (moved rigidly, exactly);
+    the query's other objects are of a class the stored keyframe does not have."""
+    street = make_street(rng, count=count, length=4.0 * count)
+    stored = make_keyframe(street.centers, street.labels, street.patches(rng, range(count)))
+    motion = np.eye(4)
+    motion[:2, :2] = [[np.cos(motion_yaw), -np.sin(motion_yaw)], [np.sin(motion_yaw), np.cos(motion_yaw)]]
+    motion[:3, 3] = [30.0, 5.0, 0.0]
+    centres = transform_points(motion, street.centers)
+    labels = [label if i < shared else "traffic light" for i, label in enumerate(street.labels)]
+    return make_keyframe(centres, labels, street.patches(rng, range(count))), stored
+
+
+@pytest.mark.parametrize(("count", "verified"), [(3, False), (4, True)])
+def test_min_inliers_is_enforced(make_keyframe, make_street, count: int, verified: bool) -> None:
+    query, stored = _copy(make_keyframe, make_street, np.random.default_rng(count), count, count)
+    match = match_keyframes(query, stored, CONFIG, E_MAX)
+    assert match.n_matches == count
+    assert match.verified is verified and (match.verified_score > 0) is verified
+    relaxed = CONFIG.model_copy(update={"min_inliers": 3})
+    assert match_keyframes(query, stored, relaxed, E_MAX).verified
+
+
+@pytest.mark.parametrize(("shared", "ratio", "verified"), [(6, 0.7, False), (7, 0.7, True), (6, 0.6, True)])
+def test_min_inlier_ratio_is_enforced(make_keyframe, make_street, shared: int, ratio: float, verified: bool) -> None:
+    # Ten objects each: 0.7 x 10 = 7 must match, whatever min_inliers (4) says.
+    query, stored = _copy(make_keyframe, make_street, np.random.default_rng(shared), 10, shared)
+    match = match_keyframes(query, stored, CONFIG.model_copy(update={"min_inlier_ratio": ratio}), E_MAX)
+    assert match.n_matches == shared
+    assert match.verified is verified
+
+
+@pytest.mark.parametrize("k", [4, 6, 9])
+def test_score_counts_consistent_ordered_pairs(make_keyframe, make_street, k: int) -> None:
+    query, stored = _copy(make_keyframe, make_street, np.random.default_rng(k), k, k)
+    match = match_keyframes(query, stored, CONFIG, E_MAX)
+    assert match.verified and match.n_matches == k
+    assert match.score == pytest.approx(k * (k - 1), abs=1e-9)
+    assert match.verified_score == pytest.approx(match.score, abs=1e-9)
+    assert match.residual_rms < 1e-9
+
+
+def test_nothing_to_match_gives_an_empty_unverified_match(make_keyframe) -> None:
+    query = make_keyframe([[0, 0, 0], [5, 0, 0]], ["car", "car"])
+    stored = make_keyframe([[0, 0, 0], [5, 0, 0]], ["person", "truck"])
+    match = match_keyframes(query, stored, CONFIG, E_MAX)
+    assert not match.verified and match.score == 0.0 and match.n_matches == 0
+    assert len(spectral_matching(np.zeros((0, 0)), np.empty((0, 2), dtype=int))) == 0
