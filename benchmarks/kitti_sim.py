@@ -83,7 +83,8 @@ def _medians(rows: list[dict], keys: list[str]) -> list[dict]:
         groups.setdefault((row["sequence"], row["profile"]), []).append(row)
     summary = []
     for (sequence, profile), group in groups.items():
-        values = {k: statistics.median(r[k] for r in group if r[k] is not None) for k in keys}
+        present = {k: [r[k] for r in group if r[k] is not None] for k in keys}
+        values = {k: statistics.median(v) if v else None for k, v in present.items()}
         summary.append({"sequence": sequence, "profile": profile, "seeds": len(group)} | values)
     return summary
 

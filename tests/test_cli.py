@@ -372,3 +372,131 @@ def test_evaluate_a_short_trajectory(tmp_path: Path) -> None:
     result = _invoke("evaluate", path, path)
     assert result.exit_code in (0, 2), result.exception
     assert "Traceback" not in result.output
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The experience map of a run (paper 3.6): experience_map.json against metrics.json, and the two back ends.
+
+BLOCK_FRAMES = 600  # the block route up to its first revisit of the start: a few loop closures
+
+
+@pytest.fixture(scope="module")
+def block_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The simulated block route (vo noise), run with `--backend relaxation` and with `--backend pose-graph`."""
+    from neoslam.io.trajectory_files import write_tum
+    from neoslam.sim.routes import ROUTES, drive_route
+
+    root = tmp_path_factory.mktemp("backends")
+    sim = NeoSLAMConfig().simulator
+    truth = drive_route(ROUTES["block"], sim.frame_period, sim.camera.height_above_ground)
+    write_tum(root / "block.txt", truth.subset(np.arange(BLOCK_FRAMES)))
+    _ok("simulate", "--trajectory", root / "block.txt", "--noise", "vo", "--seed", 2, "--out", root / "data", "-q")
+    outs = {}
+    for backend in ("relaxation", "pose-graph"):
+        outs[backend] = root / backend
+        _ok("run", root / "data", "--backend", backend, "--out", outs[backend], "-q")
+    return outs
+
+
+@pytest.mark.parametrize("backend", ["relaxation", "pose-graph"])
+def test_run_records_its_backend(block_runs: dict[str, Path], backend: str) -> None:
+    out = block_runs[backend]
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["experience_map"]["backend"] == backend
+    assert json.loads((out / "experience_map.json").read_text())["backend"] == backend
+    assert load_config(out / "config.yaml", environ={}).experience_map.backend == backend
+    assert metrics["frames"] == BLOCK_FRAMES
+    assert metrics["loops"]["accepted"] > 0
+    assert metrics["ate_rmse_m"]["corrected"] < metrics["ate_rmse_m"]["odometry"]
+
+
+@pytest.mark.parametrize("backend", ["relaxation", "pose-graph"])
+def test_experience_map_json_agrees_with_metrics(block_runs: dict[str, Path], backend: str) -> None:
+    out = block_runs[backend]
+    metrics = json.loads((out / "metrics.json").read_text())
+    block = metrics["experience_map"]
+    payload = json.loads((out / "experience_map.json").read_text())
+    experiences, links = payload["experiences"], payload["links"]
+
+    assert set(block) == {"backend", "experiences", "links", "closures_rejected_by_grid_cells"}
+    assert len(experiences) == block["experiences"] > 1
+    assert len(links) == block["links"]
+    assert isinstance(block["closures_rejected_by_grid_cells"], int) and block["closures_rejected_by_grid_cells"] >= 0
+    assert {"loops", "cells", "experience_map"} <= set(metrics)
+    assert {"grid_cells_vs_odometry_rms_m", "head_direction_vs_odometry_rms_deg"} <= set(metrics["cells"])
+
+    ids = [e["id"] for e in experiences]
+    assert ids == list(range(len(experiences)))
+    frames = [e["frame"] for e in experiences]
+    assert frames[0] == 0 and frames == sorted(set(frames)) and frames[-1] < BLOCK_FRAMES
+    keyframes = [e["keyframe"] for e in experiences if e["keyframe"] is not None]
+    assert len(keyframes) == len(set(keyframes)) == metrics["keyframes"]
+    for link in links:
+        assert 0 <= link["source"] < len(experiences) and 0 <= link["target"] < len(experiences), link
+        assert link["kind"] in ("odometry", "loop")
+    odometry_links = [(k["source"], k["target"]) for k in links if k["kind"] == "odometry"]
+    assert odometry_links == [(i, i + 1) for i in range(len(experiences) - 1)]  # each experience to the previous
+    loop_links = [k for k in links if k["kind"] == "loop"]
+    assert len(loop_links) == metrics["loops"]["accepted"]
+    assert all(k["distance_m"] == 0.0 for k in loop_links)
+    assert all(k["distance_m"] > 0.0 for k in links if k["kind"] == "odometry")
+
+
+@pytest.mark.parametrize("backend", ["relaxation", "pose-graph"])
+def test_loop_links_are_the_accepted_closures(block_runs: dict[str, Path], backend: str) -> None:
+    """Each loop link joins the experiences of a closure's stored and query keyframes (loop_closures.csv)."""
+    from neoslam.io.results import read_loop_closures
+
+    out = block_runs[backend]
+    payload = json.loads((out / "experience_map.json").read_text())
+    keyframe_of = {e["id"]: e["keyframe"] for e in payload["experiences"]}
+    linked = sorted(
+        (keyframe_of[k["source"]], keyframe_of[k["target"]]) for k in payload["links"] if k["kind"] == "loop"
+    )
+    closures = read_loop_closures(out / "loop_closures.csv")
+    assert linked == sorted((c.match_keyframe, c.query_keyframe) for c in closures)
+
+
+@pytest.mark.parametrize("backend", ["relaxation", "pose-graph"])
+def test_experience_poses_are_the_trajectory_at_their_frames(block_runs: dict[str, Path], backend: str) -> None:
+    """An experience's corrected pose is the written trajectory at its frame; its odometry pose the odometry's."""
+    out = block_runs[backend]
+    experiences = json.loads((out / "experience_map.json").read_text())["experiences"]
+    frames = [e["frame"] for e in experiences]
+    trajectory = np.loadtxt(out / "trajectory_tum.txt")
+    odometry = np.loadtxt(out / "odometry_tum.txt")
+    corrected = np.array([[e["pose"][k] for k in ("x", "y", "z")] for e in experiences])
+    dead_reckoned = np.array([[e["odometry_pose"][k] for k in ("x", "y", "z")] for e in experiences])
+    np.testing.assert_allclose(corrected, trajectory[frames, 1:4], atol=2e-6)
+    np.testing.assert_allclose(dead_reckoned, odometry[frames, 1:4], atol=2e-6)
+    assert np.abs(corrected - dead_reckoned).max() > 0.1  # the map was corrected
+
+
+def test_the_two_backends_correct_the_same_map_differently(block_runs: dict[str, Path]) -> None:
+    """The back end changes the correction only: same experiences and links, different corrected poses."""
+    relaxed, optimised = (json.loads((block_runs[b] / "experience_map.json").read_text()) for b in block_runs)
+
+    def structure(payload: dict) -> tuple:
+        return (
+            [(e["id"], e["frame"], e["keyframe"]) for e in payload["experiences"]],
+            [(k["source"], k["target"], k["kind"]) for k in payload["links"]],
+        )
+
+    assert structure(relaxed) == structure(optimised)
+    assert [e["pose"] for e in relaxed["experiences"]] != [e["pose"] for e in optimised["experiences"]]
+
+
+@pytest.mark.parametrize("backend", ["relaxation", "pose-graph"])
+def test_closure_plots_exist_when_closures_exist(block_runs: dict[str, Path], backend: str) -> None:
+    out = block_runs[backend]
+    assert json.loads((out / "metrics.json").read_text())["loops"]["accepted"] > 0
+    for name in ("keyframe_labels.png", "matching_scores.png"):
+        assert (out / "plots" / name).stat().st_size > 1000, name
+
+
+def test_unknown_backend_is_one_line_and_exit_2(tmp_path: Path) -> None:
+    (tmp_path / "empty").mkdir()
+    result = _invoke("run", tmp_path / "empty", "--backend", "gtsam2", "--out", tmp_path / "o", "-q")
+    _assert_one_line_error(result, ["backend", "gtsam2", "relaxation", "pose-graph"])
+    assert not (tmp_path / "o").exists()
+    assert not [p for p in tmp_path.iterdir() if "partial" in p.name]

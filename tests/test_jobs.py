@@ -205,3 +205,31 @@ def test_default_scenario_end_to_end(tmp_path: Path) -> None:
     assert 0.0 < metrics["ate_rmse_m"]["odometry"] < 50.0
     assert {"accepted", "true_positive", "false_positive", "precision", "recall"} <= set(metrics["loops"])
     assert not [p for p in tmp_path.iterdir() if "partial" in p.name]
+
+
+def test_with_backend() -> None:
+    from neoslam.jobs import with_backend
+
+    assert with_backend(CONFIG, None) == CONFIG
+    for backend in ("relaxation", "pose-graph"):
+        changed = with_backend(CONFIG, backend)
+        assert changed.experience_map.backend == backend
+        assert changed.experience_map.model_copy(update={"backend": CONFIG.experience_map.backend}) == (
+            CONFIG.experience_map
+        )
+        assert changed.model_copy(update={"experience_map": CONFIG.experience_map}) == CONFIG
+    with pytest.raises(ConfigError, match="bogus"):
+        with_backend(CONFIG, "bogus")
+
+
+def test_results_folder_has_the_experience_map(results: tuple[Path, dict]) -> None:
+    """experience_map.json of the shared run agrees with the experience_map block of metrics.json."""
+    out, metrics = results
+    payload = json.loads((out / "experience_map.json").read_text())
+    block = metrics["experience_map"]
+    assert payload["backend"] == block["backend"] == CONFIG.experience_map.backend
+    assert len(payload["experiences"]) == block["experiences"]
+    assert len(payload["links"]) == block["links"]
+    count = len(payload["experiences"])
+    assert all(0 <= k["source"] < count and 0 <= k["target"] < count for k in payload["links"])
+    assert sum(k["kind"] == "loop" for k in payload["links"]) == metrics["loops"]["accepted"]

@@ -71,7 +71,7 @@ class Experience:
     frame_index: int
     grid_cell: np.ndarray  # (3,) decoded grid-cell peak, in cells
     head_direction: float  # decoded head-direction peak, in cells
-    pose: np.ndarray  # (4, 4) T_world_robot, corrected by the map
+    pose: np.ndarray  # (4, 4) T_world_robot from the odometry when it was made (the map's graph holds it corrected)
     linear_velocity: np.ndarray  # (3,)
     angular_velocity: np.ndarray  # (3,)
     keyframe_id: int | None = None

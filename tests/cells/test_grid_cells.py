@@ -270,7 +270,7 @@ def test_kitti_path_integration_follows_the_odometry(kitti_poses):
     of the true path (measured 1.0 m, the heading's error included)."""
     poses = read_kitti(kitti_poses("05")).poses[:400]
     yaw, position = yaw_of(poses), poses[:, :3, 3]
-    head, grid = HeadDirectionCells(), GridCells()
+    head, grid = HeadDirectionCells(), GridCells(GridCellConfig(metres_per_cell=2.0))  # 2 m cells: fine resolution
     head.reset(head.cell_of(yaw[0]))
     previous, decoded = grid.centre, np.zeros(3)
     odometry = np.zeros(3)

@@ -144,7 +144,7 @@ class ExperienceMap:
 
     def trajectory(self, timestamps: np.ndarray, odometry_poses: np.ndarray) -> Trajectory:
         """A pose for every frame: its experience's corrected pose, moved on by the odometry since."""
-        owner = np.asarray(self._frame_experience)
-        anchors = np.asarray(self._odometry_poses)[owner]
+        owner = np.asarray(self._frame_experience, dtype=int)
+        anchors = np.asarray(self._odometry_poses).reshape(-1, 4, 4)[owner]
         poses = self.graph.poses[owner] @ invert_pose(anchors) @ odometry_poses
         return Trajectory(np.asarray(timestamps), poses)

@@ -1,0 +1,416 @@
+"""The object experience map (paper 3.6, eq. 15-18): when experiences are made, how they are linked, which loop
+closures it accepts, how each back end corrects it, and the trajectory and keyframe points it gives back."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from neoslam.config import ExperienceMapConfig
+from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
+from neoslam.geometry import invert_pose, make_pose, relative_pose, transform_points
+from neoslam.mapping.experience_map import CellState, ExperienceMap
+from neoslam.types import LoopClosure, Trajectory
+
+DIMS = (36, 36, 36)
+RING = 36
+VELOCITIES = (np.array([1.0, 0.0, 0.0]), np.zeros(3))
+CONFIG = ExperienceMapConfig()  # similarity_threshold 3 cells, gc_distance_threshold 7 cells, mu 1 and 1
+
+# A square driven once and back to its start, dead-reckoned with a yaw bias; a keyframe every KEYFRAME_EVERY frames.
+SIDE = 25
+LAP = 4 * SIDE
+STEP_M = 1.0
+YAW_BIAS_RAD = 0.002
+KEYFRAME_EVERY = 5
+
+
+def pose(yaw: float, translation=(0.0, 0.0, 0.0)) -> np.ndarray:
+    return make_pose(Rotation.from_euler("z", yaw), np.asarray(translation, dtype=float))
+
+
+def cells(grid=(0.0, 0.0, 0.0), head_direction: float = 0.0) -> CellState:
+    return CellState(np.asarray(grid, dtype=float), float(head_direction))
+
+
+def new_map(**update) -> ExperienceMap:
+    return ExperienceMap(CONFIG.model_copy(update=update), DIMS, RING)
+
+
+def square_truth() -> np.ndarray:
+    """LAP + 1 poses: once around a square turning left, ending where it started."""
+    poses, position, yaw = [], np.zeros(3), 0.0
+    for _ in range(4):
+        for _ in range(SIDE):
+            poses.append(pose(yaw, position))
+            position = position + STEP_M * np.array([np.cos(yaw), np.sin(yaw), 0.0])
+        yaw += np.pi / 2
+    poses.append(pose(yaw, position))
+    return np.array(poses)
+
+
+def dead_reckoned(truth: np.ndarray) -> np.ndarray:
+    steps = relative_pose(truth[:-1], truth[1:]) @ pose(YAW_BIAS_RAD)
+    odometry = [truth[0]]
+    for step in steps:
+        odometry.append(odometry[-1] @ step)
+    return np.array(odometry)
+
+
+def drive(experience_map: ExperienceMap, odometry: np.ndarray) -> None:
+    """One step per frame, still cells; keyframe k at frame KEYFRAME_EVERY * k."""
+    for frame, odometry_pose in enumerate(odometry):
+        travelled = 0.0 if frame == 0 else float(np.linalg.norm(odometry_pose[:3, 3] - odometry[frame - 1][:3, 3]))
+        keyframe = frame // KEYFRAME_EVERY if frame % KEYFRAME_EVERY == 0 else None
+        experience_map.step(frame, odometry_pose, VELOCITIES, cells(), travelled, keyframe)
+
+
+def closure(query_keyframe: int, match_keyframe: int, relative: np.ndarray) -> LoopClosure:
+    return LoopClosure(
+        query_frame=KEYFRAME_EVERY * query_keyframe,
+        match_frame=KEYFRAME_EVERY * match_keyframe,
+        query_keyframe=query_keyframe,
+        match_keyframe=match_keyframe,
+        score=3.0,
+        n_matches=6,
+        relative_pose=relative,
+    )
+
+
+def driven_square(backend: str) -> tuple[ExperienceMap, np.ndarray, np.ndarray]:
+    truth = square_truth()
+    odometry = dead_reckoned(truth)
+    experience_map = new_map(backend=backend)
+    drive(experience_map, odometry)
+    return experience_map, truth, odometry
+
+
+def loop_back_to_start(truth: np.ndarray) -> LoopClosure:
+    """The last keyframe (back at the start) recognises keyframe 0, with the true relative pose."""
+    return closure(LAP // KEYFRAME_EVERY, 0, relative_pose(truth[0], truth[LAP]))
+
+
+def ate(poses: np.ndarray, truth: np.ndarray) -> float:
+    stamps = np.arange(len(truth), dtype=float)
+    return absolute_trajectory_error(Trajectory(stamps, poses), Trajectory(stamps, truth), "se3").rmse
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Creating experiences
+
+
+def test_the_first_frame_makes_an_experience() -> None:
+    experience_map = new_map()
+    experience_map.step(0, pose(0.3, (1, 2, 0)), VELOCITIES, cells((4, 5, 6), 7), 0.0, None)
+    assert len(experience_map.experiences) == 1
+    first = experience_map.experiences[0]
+    assert (first.id, first.frame_index, first.keyframe_id) == (0, 0, None)
+    np.testing.assert_array_equal(first.grid_cell, [4, 5, 6])
+    assert first.head_direction == 7
+    np.testing.assert_array_equal(experience_map.graph.poses[0], pose(0.3, (1, 2, 0)))
+    assert experience_map.graph.links == []
+
+
+def test_every_keyframe_makes_an_experience_and_nothing_else_does() -> None:
+    experience_map = new_map()
+    keyframes = {0: 0, 3: 1, 4: 2, 9: 3}  # frame -> keyframe id
+    for frame in range(12):
+        experience_map.step(frame, pose(0.0, (frame, 0, 0)), VELOCITIES, cells(), 1.0, keyframes.get(frame))
+    assert [e.keyframe_id for e in experience_map.experiences] == [0, 1, 2, 3]
+    assert [e.frame_index for e in experience_map.experiences] == [0, 3, 4, 9]
+    assert [e.id for e in experience_map.experiences] == [0, 1, 2, 3]
+    assert len(experience_map.graph) == 4
+
+
+@pytest.mark.parametrize(
+    ("first", "second", "new"),
+    [
+        (cells((0, 0, 0)), cells((3, 0, 0)), False),  # S = 3 is not above S_max = 3
+        (cells((0, 0, 0)), cells((3.5, 0, 0)), True),
+        (cells((0, 0, 0)), cells((0, 0, 0), 3), False),
+        (cells((0, 0, 0)), cells((0, 0, 0), 3.5), True),
+        (cells((0, 0, 0)), cells((2, 0, 0), 2), True),  # eq. 17 adds the two terms: 2 + 2 > 3
+        (cells((0, 0, 0)), cells((2, 2, 0)), False),  # Euclidean in the grid: 2.83
+        (cells((0, 0, 0)), cells((2, 2, 1)), False),  # 3.0
+        (cells((0, 0, 0)), cells((2, 2, 2)), True),  # 3.46
+        # circular on the torus and the ring: 35 and 0 are 1 apart
+        (cells((35, 0, 0)), cells((0, 0, 0)), False),
+        (cells((34, 0, 0)), cells((1, 0, 0)), False),  # 3 apart across the wrap, not 33
+        (cells((34, 0, 0)), cells((1.5, 0, 0)), True),
+        (cells((0, 35, 0)), cells((0, 1, 0)), False),
+        (cells((0, 0, 1)), cells((0, 0, 34)), False),
+        (cells((0, 0, 0), 35), cells((0, 0, 0), 0), False),
+        (cells((0, 0, 0), 34), cells((0, 0, 0), 1), False),
+        (cells((0, 0, 0), 34), cells((0, 0, 0), 1.5), True),
+        (cells((0, 0, 0), 0), cells((0, 0, 0), 18), True),  # the farthest point of the ring
+        (cells((35, 35, 35), 35), cells((0, 0, 0), 0), False),  # sqrt(3) + 1 = 2.73
+    ],
+)
+def test_a_new_experience_when_the_cells_moved_more_than_s_max(first: CellState, second: CellState, new: bool) -> None:
+    experience_map = new_map()
+    experience_map.step(0, np.eye(4), VELOCITIES, first, 0.0, None)
+    experience_map.step(1, pose(0.0, (1, 0, 0)), VELOCITIES, second, 1.0, None)
+    assert len(experience_map.experiences) == (2 if new else 1)
+    if new:
+        assert experience_map.experiences[1].frame_index == 1
+        assert experience_map.experiences[1].keyframe_id is None
+
+
+def test_the_weights_of_eq_17() -> None:
+    """mu_hdc = 0: head-direction moves alone never make an experience; mu_gc = 2 doubles the grid term."""
+    no_heading = new_map(mu_hdc=0.0)
+    no_heading.step(0, np.eye(4), VELOCITIES, cells(), 0.0, None)
+    no_heading.step(1, np.eye(4), VELOCITIES, cells((0, 0, 0), 18), 0.0, None)
+    assert len(no_heading.experiences) == 1
+    double_grid = new_map(mu_gc=2.0)
+    double_grid.step(0, np.eye(4), VELOCITIES, cells(), 0.0, None)
+    double_grid.step(1, np.eye(4), VELOCITIES, cells((2, 0, 0)), 0.0, None)
+    assert len(double_grid.experiences) == 2
+    assert double_grid.similarity(cells((2, 0, 0)), double_grid.experiences[0]) == pytest.approx(4.0)
+
+
+def test_cells_are_compared_with_the_current_experience_not_the_previous_frame() -> None:
+    """One cell per frame, through the wrap 35 -> 0: a new experience once 4 cells from the last one's."""
+    experience_map = new_map()
+    for frame in range(10):
+        x = (33 + frame) % 36
+        experience_map.step(frame, pose(0.0, (frame, 0, 0)), VELOCITIES, cells((x, 0, 0)), 1.0, None)
+    assert [e.frame_index for e in experience_map.experiences] == [0, 4, 8]
+    assert [float(e.grid_cell[0]) for e in experience_map.experiences] == [33.0, 1.0, 5.0]
+
+
+def test_similarity_is_circular() -> None:
+    experience_map = new_map()
+    experience_map.step(0, np.eye(4), VELOCITIES, cells((35, 0, 17), 35), 0.0, None)
+    stored = experience_map.experiences[0]
+    assert experience_map.similarity(cells((0, 0, 17), 0), stored) == pytest.approx(2.0)
+    assert experience_map.similarity(cells((35, 0, 17), 35), stored) == 0.0
+    assert experience_map.similarity(cells((17, 0, 17), 35), stored) == pytest.approx(18.0)
+
+
+def test_each_new_experience_is_linked_to_the_previous_by_the_odometry() -> None:
+    truth = square_truth()[:40]
+    odometry = dead_reckoned(truth)
+    experience_map = new_map()
+    drive(experience_map, odometry)
+
+    experiences = experience_map.experiences
+    assert len(experiences) == 8  # frames 0, 5, ..., 35
+    links = experience_map.graph.links
+    assert [(k.source, k.target, k.kind) for k in links] == [(i, i + 1, "odometry") for i in range(7)]
+    for link in links:
+        source, target = experiences[link.source], experiences[link.target]
+        np.testing.assert_allclose(
+            link.relative, relative_pose(odometry[source.frame_index], odometry[target.frame_index]), atol=1e-12
+        )
+        assert link.distance_m == pytest.approx(KEYFRAME_EVERY * STEP_M)  # travelled since the previous experience
+    # uncorrected, the map is the odometry
+    np.testing.assert_allclose(experience_map.graph.poses, odometry[[e.frame_index for e in experiences]], atol=1e-9)
+    np.testing.assert_allclose(experience_map.graph.link_residuals(), 0.0, atol=1e-9)
+
+
+def test_the_link_distance_adds_every_frame_since_the_previous_experience() -> None:
+    experience_map = new_map()
+    travelled = [0.0, 0.5, 0.25, 2.0, 1.0]
+    keyframes = [0, None, None, 1, None]
+    for frame, (metres, keyframe) in enumerate(zip(travelled, keyframes, strict=True)):
+        experience_map.step(frame, pose(0.0, (frame, 0, 0)), VELOCITIES, cells(), metres, keyframe)
+    experience_map.step(5, pose(0.0, (5, 0, 0)), VELOCITIES, cells(), 0.75, 2)
+    assert [k.distance_m for k in experience_map.graph.links] == pytest.approx([2.75, 1.75])
+
+
+def test_a_new_experience_is_placed_from_its_corrected_predecessor() -> None:
+    """After a correction, the next experience sits where the odometry puts it relative to the corrected map."""
+    experience_map = new_map()
+    experience_map.step(0, np.eye(4), VELOCITIES, cells(), 0.0, 0)
+    experience_map.step(1, pose(0.0, (2, 0, 0)), VELOCITIES, cells(), 2.0, 1)
+    correction = pose(0.5, (1.0, -1.0, 0.2))
+    experience_map.graph.poses[1] = correction @ experience_map.graph.poses[1]
+
+    experience_map.step(2, pose(0.3, (3, 1, 0)), VELOCITIES, cells(), 1.4, 2)
+
+    expected = experience_map.graph.poses[1] @ relative_pose(pose(0.0, (2, 0, 0)), pose(0.3, (3, 1, 0)))
+    np.testing.assert_allclose(experience_map.graph.poses[2], expected, atol=1e-12)
+    np.testing.assert_allclose(experience_map.experiences[2].pose, pose(0.3, (3, 1, 0)))  # the odometry pose
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Loop closures
+
+
+def two_keyframe_map(**update) -> ExperienceMap:
+    experience_map = new_map(**update)
+    experience_map.step(0, np.eye(4), VELOCITIES, cells((0, 0, 0)), 0.0, 0)
+    experience_map.step(1, pose(0.0, (1, 0, 0)), VELOCITIES, cells((10, 0, 0)), 1.0, 1)
+    return experience_map
+
+
+@pytest.mark.parametrize(
+    ("current", "accepted"),
+    [
+        ((7, 0, 0), True),  # 7 cells: at the threshold
+        ((7.5, 0, 0), False),
+        ((4, 4, 4), True),  # 6.93
+        ((5, 5, 0), False),  # 7.07
+        ((30, 0, 0), True),  # 6 cells across the wrap
+        ((28, 0, 0), False),  # 8 cells across the wrap
+        ((0, 0, 0), True),
+    ],
+)
+def test_a_closure_is_accepted_only_when_the_grid_cells_agree(current: tuple, accepted: bool) -> None:
+    experience_map = two_keyframe_map()
+    loop = closure(1, 0, pose(0.0, (1, 0, 0)))
+
+    assert experience_map.close_loop(loop, cells(current)) is accepted
+
+    kinds = [k.kind for k in experience_map.graph.links]
+    if accepted:
+        assert experience_map.accepted_closures == [loop] and experience_map.rejected_closures == []
+        assert kinds == ["odometry", "loop"]
+        link = experience_map.graph.links[-1]
+        assert (link.source, link.target, link.distance_m) == (0, 1, 0.0)  # stored -> query: T_match_query
+        np.testing.assert_array_equal(link.relative, loop.relative_pose)
+    else:
+        assert experience_map.rejected_closures == [loop] and experience_map.accepted_closures == []
+        assert kinds == ["odometry"]
+
+
+def test_the_grid_cell_check_ignores_the_head_direction() -> None:
+    experience_map = two_keyframe_map()
+    assert experience_map.close_loop(closure(1, 0, np.eye(4)), cells((0, 0, 0), 18))
+
+
+def test_a_closure_of_an_unknown_keyframe_is_neither_accepted_nor_rejected() -> None:
+    experience_map = two_keyframe_map()
+    assert not experience_map.close_loop(closure(5, 0, np.eye(4)), cells())
+    assert not experience_map.close_loop(closure(1, 7, np.eye(4)), cells())
+    assert experience_map.accepted_closures == [] and experience_map.rejected_closures == []
+    assert len(experience_map.graph.links) == 1
+
+
+def test_a_rejected_closure_leaves_the_map() -> None:
+    for backend in ("relaxation", "pose-graph"):
+        experience_map, truth, _ = driven_square(backend)
+        before = experience_map.graph.poses.copy()
+        assert not experience_map.close_loop(loop_back_to_start(truth), cells((18, 18, 18)))
+        experience_map.correct()
+        np.testing.assert_array_equal(experience_map.graph.poses, before)
+        assert all(k.kind == "odometry" for k in experience_map.graph.links)
+
+
+def test_pose_graph_backend_corrects_the_map_at_once() -> None:
+    experience_map, truth, odometry = driven_square("pose-graph")
+    frames = [e.frame_index for e in experience_map.experiences]
+    drift_gap = np.linalg.norm(odometry[LAP, :3, 3] - odometry[0, :3, 3])
+    drift_ate = ate(experience_map.graph.poses, truth[frames])
+
+    assert experience_map.close_loop(loop_back_to_start(truth), cells())
+
+    assert drift_gap > 1.0
+    # a least-squares compromise (loop_sigma 0.5 m against 20 odometry links), not an exact fit
+    assert experience_map.graph.link_residuals()[-1] < drift_gap / 10
+    assert ate(experience_map.graph.poses, truth[frames]) < drift_ate / 10
+    before = experience_map.graph.poses.copy()
+    experience_map.correct()  # nothing more to do per frame
+    np.testing.assert_array_equal(experience_map.graph.poses, before)
+
+
+def test_relaxation_backend_corrects_the_map_frame_by_frame() -> None:
+    experience_map, truth, _ = driven_square("relaxation")
+    frames = [e.frame_index for e in experience_map.experiences]
+    experience_map.correct()  # no loop yet: nothing to relax
+    np.testing.assert_allclose(experience_map.graph.link_residuals(), 0.0, atol=1e-9)
+    before = experience_map.graph.poses.copy()
+    drift_ate = ate(before, truth[frames])
+
+    assert experience_map.close_loop(loop_back_to_start(truth), cells())
+    np.testing.assert_array_equal(experience_map.graph.poses, before)  # the closure alone moves nothing
+    gap = experience_map.graph.link_residuals()[-1]
+    experience_map.correct()
+    assert experience_map.graph.link_residuals()[-1] < gap
+    for _ in range(200):
+        experience_map.correct()
+
+    assert gap > 1.0
+    assert experience_map.graph.link_residuals()[-1] < 0.01
+    assert ate(experience_map.graph.poses, truth[frames]) < drift_ate / 10
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Trajectory and keyframe points
+
+
+def test_trajectory_without_correction_is_the_odometry() -> None:
+    experience_map, _, odometry = driven_square("relaxation")
+    stamps = 0.1 * np.arange(len(odometry))
+    trajectory = experience_map.trajectory(stamps, odometry)
+    assert len(trajectory) == len(odometry)
+    np.testing.assert_array_equal(trajectory.timestamps, stamps)
+    np.testing.assert_allclose(trajectory.poses, odometry, atol=1e-9)
+
+
+def test_trajectory_frames_follow_their_experience() -> None:
+    experience_map, truth, odometry = driven_square("pose-graph")
+    experience_map.close_loop(loop_back_to_start(truth), cells())
+    stamps = 0.1 * np.arange(len(odometry))
+
+    trajectory = experience_map.trajectory(stamps, odometry)
+
+    assert len(trajectory) == len(odometry)
+    for experience in experience_map.experiences:
+        first = experience.frame_index
+        np.testing.assert_allclose(trajectory.poses[first], experience_map.graph.poses[experience.id], atol=1e-9)
+        for frame in range(first, min(first + KEYFRAME_EVERY, len(odometry))):  # frames it owns
+            np.testing.assert_allclose(
+                relative_pose(trajectory.poses[first], trajectory.poses[frame]),
+                relative_pose(odometry[first], odometry[frame]),
+                atol=1e-9,
+            )
+    assert ate(trajectory.poses, truth) < ate(odometry, truth) / 5
+    # the online pose of the last frame is the trajectory's
+    np.testing.assert_allclose(experience_map.current_pose(odometry[-1]), trajectory.poses[-1], atol=1e-9)
+
+
+def test_trajectory_moves_with_a_known_correction() -> None:
+    experience_map = new_map()
+    odometry = np.array([pose(0.1 * k, (k, 0.2 * k, 0)) for k in range(8)])
+    for frame, odometry_pose in enumerate(odometry):
+        experience_map.step(frame, odometry_pose, VELOCITIES, cells(), 1.0, {0: 0, 4: 1}.get(frame))
+    correction = pose(-0.4, (2.0, 3.0, -1.0))
+    experience_map.graph.poses[1] = correction @ experience_map.graph.poses[1]
+
+    poses = experience_map.trajectory(np.arange(8.0), odometry).poses
+
+    np.testing.assert_allclose(poses[:4], odometry[:4], atol=1e-12)
+    np.testing.assert_allclose(poses[4:], correction @ odometry[4:], atol=1e-12)
+    anchor, anchor_from_robot = experience_map.anchor(odometry[6])
+    assert anchor == 1
+    np.testing.assert_allclose(anchor_from_robot, relative_pose(odometry[4], odometry[6]), atol=1e-12)
+
+
+def test_corrected_points_move_with_their_experience() -> None:
+    experience_map = new_map()
+    odometry = [pose(0.0), pose(0.7, (5, 1, 0)), pose(1.2, (8, 4, 0))]
+    for frame, odometry_pose in enumerate(odometry):
+        experience_map.step(frame, odometry_pose, VELOCITIES, cells(), 1.0, frame + 10)  # keyframes 10, 11, 12
+    points = np.array([[6.0, 3.0, 1.0], [4.0, -2.0, 0.5]])
+    np.testing.assert_allclose(experience_map.corrected_points(11, points), points, atol=1e-12)
+
+    correction = pose(0.3, (-1.0, 2.0, 0.4))
+    experience_map.graph.poses[1] = correction @ experience_map.graph.poses[1]
+
+    np.testing.assert_allclose(experience_map.corrected_points(11, points), transform_points(correction, points))
+    np.testing.assert_allclose(experience_map.corrected_points(10, points), points, atol=1e-12)
+    np.testing.assert_allclose(experience_map.corrected_points(12, points), points, atol=1e-12)
+    # seen from the corrected experience, the points are where they were seen from its odometry pose
+    np.testing.assert_allclose(
+        transform_points(invert_pose(experience_map.graph.poses[1]), experience_map.corrected_points(11, points)),
+        transform_points(invert_pose(odometry[1]), points),
+        atol=1e-12,
+    )
+
+
+def test_trajectory_of_an_empty_map_is_empty() -> None:
+    trajectory = new_map().trajectory(np.zeros(0), np.zeros((0, 4, 4)))
+    assert len(trajectory) == 0
