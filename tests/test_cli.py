@@ -500,3 +500,70 @@ def test_unknown_backend_is_one_line_and_exit_2(tmp_path: Path) -> None:
     _assert_one_line_error(result, ["backend", "gtsam2", "relaxation", "pose-graph"])
     assert not (tmp_path / "o").exists()
     assert not [p for p in tmp_path.iterdir() if "partial" in p.name]
+
+
+# --- KITTI image sequences through the perception front end ---
+
+
+@pytest.fixture(scope="module")
+def image_run(tmp_path_factory: pytest.TempPathFactory, shared_data: Path) -> Path:
+    out = tmp_path_factory.mktemp("images") / "mini"
+    model = shared_data / "models" / "yolox_nano_coco" / "yolox_nano.onnx"
+    env = {"NEOSLAM_PERCEPTION__DETECTOR__MODEL": str(model)}
+    _ok("run", shared_data / "kitti_mini", "--sequence", "06", "--out", out, "-q", env=env)
+    return out
+
+
+def test_run_on_kitti_images_writes_the_results_folder(image_run: Path) -> None:
+    assert {p.name for p in image_run.iterdir()} >= RESULT_FILES
+    objects = (image_run / "objects.csv").read_text().splitlines()
+    assert objects[0].startswith("id,label,x,y,z") and any(",car," in line for line in objects[1:])
+    metrics = json.loads((image_run / "metrics.json").read_text())
+    assert metrics["frames"] == 12 and metrics["dataset"] == "kitti-06"
+    assert metrics["perception"]["fps_median"] > 0
+    # Stereo odometry over 13 m of real images: the odometry ATE is small.
+    assert metrics["ate_rmse_m"]["odometry"] < 0.5
+    assert len((image_run / "trajectory_tum.txt").read_text().splitlines()) == 12
+
+
+def test_run_on_kitti_images_with_detections_and_odometry_files(
+    image_run: Path, shared_data: Path, tmp_path: Path
+) -> None:
+    detections = tmp_path / "detections.jsonl"
+    box = [712.0, 170.0, 842.0, 252.0]
+    lines = [json.dumps({"frame": i, "detections": [{"label": "car", "score": 0.9, "box": box}]}) for i in range(3)]
+    detections.write_text("\n".join(lines) + "\n")
+    odometry = image_run / "groundtruth_kitti.txt"
+    out = tmp_path / "files"
+    root = shared_data / "kitti_mini"
+    _ok("run", root, "--sequence", "06", "--detections", detections, "--odometry", odometry, "--out", out, "-q")
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["ate_rmse_m"]["odometry"] < 1e-3  # the ground truth given as odometry comes back
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        (["--out", "{o}"], ["kitti_mini", "needs --sequence NN", "sequences here: 06"]),
+        (["--sequence", "07", "--out", "{o}"], ["sequences/07", "sequence not found"]),
+        (["--sequence", "06", "--detections", "{t}/missing.jsonl", "--out", "{o}"], ["missing.jsonl", "not found"]),
+        (["--sequence", "06", "--odometry", "{t}/missing.txt", "--out", "{o}"], ["missing.txt", "not found"]),
+    ],
+)
+def test_bad_image_inputs_are_one_line(args: list[str], expected: list[str], shared_data: Path, tmp_path: Path) -> None:
+    out = tmp_path / "o"
+    fill = {"o": out, "t": tmp_path}
+    result = _invoke("run", shared_data / "kitti_mini", *(a.format(**fill) for a in args), "-q")
+    _assert_one_line_error(result, [e.format(**fill) for e in expected])
+    assert not out.exists()
+
+
+def test_missing_detector_model_is_one_line(shared_data: Path, tmp_path: Path) -> None:
+    env = {"NEOSLAM_PERCEPTION__DETECTOR__MODEL": str(tmp_path / "nowhere.onnx")}
+    result = _invoke("run", shared_data / "kitti_mini", "--sequence", "06", "--out", tmp_path / "o", "-q", env=env)
+    _assert_one_line_error(result, ["nowhere.onnx", "YOLOX-ONNX-TFLite-Sample"])
+
+
+def test_image_options_need_a_kitti_root(workspace: Path, tmp_path: Path) -> None:
+    result = _invoke("run", workspace / "data", "--sequence", "06", "--out", tmp_path / "o", "-q")
+    _assert_one_line_error(result, ["--sequence", "KITTI image sequences only"])

@@ -13,7 +13,15 @@ from neoslam.config import NOISE_PROFILES, NeoSLAMConfig
 from neoslam.errors import ConfigError, InputError, OutputError
 from neoslam.geometry import transform_points
 from neoslam.io.trajectory_files import read_tum, write_tum
-from neoslam.jobs import DEFAULT_ROUTE, evaluate_files, record, run_dataset, simulate_dataset, simulation_config
+from neoslam.jobs import (
+    DEFAULT_ROUTE,
+    ImageInputs,
+    evaluate_files,
+    record,
+    run_dataset,
+    simulate_dataset,
+    simulation_config,
+)
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.types import Trajectory
 
@@ -161,10 +169,12 @@ def test_a_failed_run_leaves_nothing(tmp_path: Path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == ["not_a_dataset"]
 
 
-def test_kitti_image_root_is_refused_with_a_reason(tmp_path: Path) -> None:
+def test_kitti_root_needs_a_sequence_and_a_failed_run_leaves_nothing(tmp_path: Path) -> None:
     (tmp_path / "kitti" / "sequences" / "00").mkdir(parents=True)
-    with pytest.raises(InputError, match="perception"):
+    with pytest.raises(InputError, match="needs --sequence NN"):
         run_dataset(tmp_path / "kitti", tmp_path / "out", CONFIG, progress=False)
+    with pytest.raises(InputError, match="calibration file not found"):
+        run_dataset(tmp_path / "kitti", tmp_path / "out", CONFIG, progress=False, inputs=ImageInputs("00"))
     assert not (tmp_path / "out").exists()
 
 

@@ -87,17 +87,26 @@ def simulate(
 def run_command(
     data: Annotated[Path | None, typer.Argument(help="Dataset folder; none runs the default scenario.")] = None,
     out: OutOption = Path("results"),
+    sequence: Annotated[str | None, typer.Option(help="KITTI sequence under a KITTI odometry root, e.g. 06.")] = None,
+    detections: Annotated[
+        Path | None, typer.Option(help="Detections file (JSON lines) instead of the built-in YOLOX detector.")
+    ] = None,
+    odometry: Annotated[
+        Path | None, typer.Option(help="Odometry poses (TUM or KITTI, one per image) instead of stereo odometry.")
+    ] = None,
     backend: Annotated[str | None, typer.Option(help="Map correction: relaxation or pose-graph.")] = None,
     config: ConfigOption = None,
     overwrite: OverwriteOption = False,
     quiet: QuietOption = False,
 ) -> None:
-    """Run NeoSLAM on a dataset and write the results folder (trajectories, object map, metrics, plots)."""
-    from neoslam.jobs import run_dataset, with_backend
+    """Run NeoSLAM on a simulated dataset or a KITTI image sequence and write the results folder (trajectories,
+    object map, metrics, plots)."""
+    from neoslam.jobs import ImageInputs, run_dataset, with_backend
 
     try:
         settings = with_backend(load_config(config), backend)
-        metrics = run_dataset(data, out, settings, overwrite, progress=not quiet)
+        inputs = ImageInputs(sequence, detections, odometry)
+        metrics = run_dataset(data, out, settings, overwrite, progress=not quiet, inputs=inputs)
     except (NeoSLAMError, OSError) as error:
         _fail(error)
     rows: list[tuple[str, Any]] = [("results", out), ("frames", metrics["frames"])]
@@ -105,6 +114,8 @@ def run_command(
         rows += [(f"ATE {name} [m]", value) for name, value in metrics["ate_rmse_m"].items()]
     rows += [("loop closures", metrics["loops"]["accepted"]), ("objects in map", metrics["objects"])]
     rows += [("frames per second", metrics["timing"]["fps"])]
+    if metrics.get("perception"):
+        rows += [("perception frames per second (median)", metrics["perception"]["fps_median"])]
     typer.echo(_table(rows))
 
 

@@ -14,6 +14,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from neoslam.errors import ConfigError, InputError
+from neoslam.perception.config import PerceptionConfig
 
 __all__ = [
     "CameraConfig",
@@ -31,6 +32,7 @@ __all__ = [
     "ExperienceMapConfig",
     "ObjectMapConfig",
     "EvaluationConfig",
+    "PerceptionConfig",
     "NeoSLAMConfig",
     "load_config",
     "dump_config",
@@ -258,6 +260,9 @@ class MatchingConfig(_Section):
     min_inlier_ratio: float = Field(
         0.7, ge=0, le=1, description="and this share of the smaller keyframe's objects (a place, not a pattern)"
     )
+    min_inlier_ratio_larger: float = Field(
+        0.0, ge=0, le=1, description="EXPERIMENT"
+    )
     max_fit_residual: float = Field(0.6, gt=0, description="max RMS residual of the rigid fit, m (ground plane)")
     inlier_distance: float = Field(1.5, gt=0, description="a match fits the rigid transform within this, m")
     max_place_offset: float = Field(
@@ -333,6 +338,7 @@ class EvaluationConfig(_Section):
 class NeoSLAMConfig(_Section):
     """Everything, one section per component."""
 
+    perception: PerceptionConfig = PerceptionConfig()
     simulator: SimulatorConfig = SimulatorConfig()
     grid_cells: GridCellConfig = GridCellConfig()
     head_direction: HeadDirectionConfig = HeadDirectionConfig()

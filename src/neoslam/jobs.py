@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from collections.abc import Iterator
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from neoslam.config import NOISE_PROFILES, NeoSLAMConfig
-from neoslam.datasets.simulated import SimulatedDataset, is_simulated_dataset, read_dataset, write_dataset
+from neoslam.datasets.kitti import is_kitti_root, read_kitti_sequence
+from neoslam.datasets.simulated import is_simulated_dataset, read_dataset, write_dataset
 from neoslam.errors import ConfigError, InputError
 from neoslam.evaluation.report import cell_metrics, loop_metrics, timing_metrics, trajectory_metrics
 from neoslam.evaluation.trajectory_metrics import align, associate
@@ -27,10 +29,11 @@ from neoslam.io.results import (
     write_trajectories,
 )
 from neoslam.io.trajectory_files import read_trajectory
+from neoslam.perception.frontend import open_front_end
 from neoslam.pipeline import RunResult, run
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.sim.simulator import SimulatedRecording, simulate
-from neoslam.types import Trajectory
+from neoslam.types import Frame, Trajectory
 from neoslam.viz.plots import (
     plot_error_along_route,
     plot_keyframe_labels,
@@ -42,6 +45,7 @@ from neoslam.viz.plots import (
 
 __all__ = [
     "DEFAULT_ROUTE",
+    "ImageInputs",
     "simulation_config",
     "with_backend",
     "record",
@@ -52,6 +56,17 @@ __all__ = [
 
 DEFAULT_ROUTE = "town"
 MIN_ALIGNMENT_POSES = 3  # Umeyama needs three points
+
+
+class Dataset(Protocol):
+    """What a run reads: a simulated dataset folder or a KITTI sequence seen through the perception front end."""
+
+    name: str
+    ground_truth: Trajectory | None  # evaluation only
+
+    def __len__(self) -> int: ...
+
+    def frames(self) -> Iterator[Frame]: ...
 
 
 def simulation_config(config: NeoSLAMConfig, noise: str | None, seed: int | None) -> NeoSLAMConfig:
@@ -100,17 +115,33 @@ def simulate_dataset(out: Path, recording: SimulatedRecording, overwrite: bool =
         write_dataset(staging, recording)
 
 
-def _load(data: Path) -> SimulatedDataset:
+@dataclass(frozen=True)
+class ImageInputs:
+    """What a run on a KITTI image sequence needs besides the root: the sequence, and optionally detections and
+    odometry from files instead of the built-in detector and stereo odometry."""
+
+    sequence: str | None = None
+    detections: Path | None = None
+    odometry: Path | None = None
+
+
+def _load(data: Path, config: NeoSLAMConfig, inputs: ImageInputs) -> Dataset:
     if not data.exists():
         raise InputError(data, "dataset folder not found")
     if is_simulated_dataset(data):
+        if inputs != ImageInputs():
+            raise ConfigError("--sequence, --detections and --odometry apply to KITTI image sequences only")
         return read_dataset(data)
-    if (data / "sequences").is_dir():
-        raise InputError(data, "KITTI image sequences need the perception front end, which is not built yet")
+    if is_kitti_root(data):
+        if inputs.sequence is None:
+            found = ", ".join(sorted(p.name for p in (data / "sequences").iterdir() if p.is_dir())) or "none"
+            raise InputError(data, f"a KITTI root needs --sequence NN (sequences here: {found})")
+        sequence = read_kitti_sequence(data, inputs.sequence)
+        return open_front_end(sequence, config.perception, inputs.detections, inputs.odometry)
     raise InputError(data, "neither a simulated dataset (dataset.yaml) nor a KITTI odometry root (sequences/)")
 
 
-def _metrics(dataset: SimulatedDataset, result: RunResult, config: NeoSLAMConfig, wall_s: float) -> dict[str, Any]:
+def _metrics(dataset: Dataset, result: RunResult, config: NeoSLAMConfig, wall_s: float) -> dict[str, Any]:
     metrics: dict[str, Any] = {"dataset": dataset.name, "frames": len(dataset)}
     truth = dataset.ground_truth
     if truth is not None:
@@ -133,6 +164,9 @@ def _metrics(dataset: SimulatedDataset, result: RunResult, config: NeoSLAMConfig
     metrics["objects"] = len(result.objects)
     metrics["cells"] = cell_metrics(result.cell_states, result.odometry, result.object_vector_cells)
     metrics["timing"] = timing_metrics(result.frame_times_s, wall_s)
+    front_end = getattr(dataset, "front_end", None)
+    if front_end is not None:
+        metrics["perception"] = front_end.times.summary()
     return metrics
 
 
@@ -173,14 +207,20 @@ def _plots(folder: Path, result: RunResult, truth: Trajectory | None, threshold:
 
 
 def run_dataset(
-    data: Path | None, out: Path, config: NeoSLAMConfig, overwrite: bool = False, progress: bool = True
+    data: Path | None,
+    out: Path,
+    config: NeoSLAMConfig,
+    overwrite: bool = False,
+    progress: bool = True,
+    inputs: ImageInputs = ImageInputs(),
 ) -> dict[str, Any]:
-    """Run NeoSLAM on a dataset folder (or simulate the default scenario first) and write the results folder."""
+    """Run NeoSLAM on a dataset folder or KITTI sequence (or simulate the default scenario first) and write the
+    results folder."""
     with atomic_directory(out, overwrite) as staging:
         if data is None:
             write_dataset(staging / "dataset", record(config, route=DEFAULT_ROUTE, progress=progress))
             data = staging / "dataset"
-        dataset = _load(data)
+        dataset = _load(data, config, inputs)
         start = time.perf_counter()
         result = run(dataset.frames(), config, total=len(dataset), progress=progress)
         wall_s = time.perf_counter() - start

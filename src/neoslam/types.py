@@ -32,6 +32,7 @@ class ObjectObservation:
     box_right: np.ndarray  # (4,) same box matched in the right image
     center_camera: np.ndarray  # (3,) triangulated centre in the camera optical frame, metres
     patch: np.ndarray  # (h, w) uint8 grey appearance patch of the object in the left image
+    depth_sigma: float | None = None  # std of the centre's depth, m, when the stereo front end measured it
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,0 +1,169 @@
+"""The perception front end (paper 3.1): a stereo image sequence becomes NeoSLAM frames.
+
+Per frame: detect objects in the left image, place them in 3-D by ORB stereo matching, and move the robot by
+stereo visual odometry (or by a pose file). The frame carries the odometry pose, the body velocities of the step
+and the object observations; nothing here reads ground truth.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from neoslam.datasets.kitti import KittiSequence
+from neoslam.errors import ConfigError, InputError
+from neoslam.geometry import body_velocities, invert_pose
+from neoslam.io.frames import camera_poses_to_robot
+from neoslam.io.trajectory_files import read_trajectory
+from neoslam.perception.config import PerceptionConfig
+from neoslam.perception.detections_file import DetectionsFile
+from neoslam.perception.detector import ObjectDetector, YoloxDetector
+from neoslam.perception.odometry import StereoOdometry
+from neoslam.perception.stereo import ObjectTriangulator
+from neoslam.types import Frame, ObjectObservation, Trajectory
+
+__all__ = ["MotionSource", "PerceptionTimes", "StereoFrontEnd", "ImageDataset", "open_front_end"]
+
+STAGES = ("read", "detection", "stereo", "odometry")
+
+
+class MotionSource(Protocol):
+    def pose(self, frame_index: int, left: np.ndarray, right: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+        """T_world_robot of the frame, the world being the first frame's robot pose."""
+        ...
+
+
+class StereoMotion:
+    """Stereo visual odometry from the images."""
+
+    def __init__(self, odometry: StereoOdometry) -> None:
+        self.odometry = odometry
+
+    def pose(self, frame_index: int, left: np.ndarray, right: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+        self.odometry.step(left, right, boxes)
+        return camera_poses_to_robot(self.odometry.pose[None])[0]
+
+
+class PoseFileMotion:
+    """Odometry read from a trajectory file (one pose per image), moved so that it starts at the identity."""
+
+    def __init__(self, trajectory: Trajectory) -> None:
+        self.poses = invert_pose(trajectory.poses[0]) @ trajectory.poses
+
+    def pose(self, frame_index: int, left: np.ndarray, right: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+        return self.poses[frame_index]
+
+
+@dataclass
+class PerceptionTimes:
+    """Wall time of each front-end stage, per frame, seconds."""
+
+    stages: dict[str, list[float]] = field(default_factory=lambda: {stage: [] for stage in STAGES})
+
+    def add(self, stage: str, seconds: float) -> None:
+        self.stages[stage].append(seconds)
+
+    def summary(self) -> dict[str, float]:
+        """Median per stage, median and 95th percentile of their sum, in ms; frames per second of the front end."""
+        timed = [stage for stage in STAGES if self.stages[stage]]
+        if not timed:
+            return {}
+        total = np.sum([self.stages[s] for s in timed], axis=0)
+        figures = {f"{s}_ms_median": round(float(np.median(self.stages[s])) * 1e3, 2) for s in timed}
+        figures["total_ms_median"] = round(float(np.median(total)) * 1e3, 2)
+        figures["total_ms_p95"] = round(float(np.percentile(total, 95)) * 1e3, 2)
+        figures["fps_median"] = round(1.0 / float(np.median(total)), 2)
+        return figures
+
+
+class StereoFrontEnd:
+    """Detection, ORB stereo triangulation and odometry for one stereo frame at a time."""
+
+    def __init__(self, triangulator: ObjectTriangulator, detector: ObjectDetector, motion: MotionSource) -> None:
+        self.triangulator = triangulator
+        self.detector = detector
+        self.motion = motion
+        self.times = PerceptionTimes()
+        self._previous: tuple[float, np.ndarray] | None = None
+
+    def _timed(self, stage: str, work, *args):
+        start = time.perf_counter()
+        result = work(*args)
+        self.times.add(stage, time.perf_counter() - start)
+        return result
+
+    def frame(self, index: int, timestamp: float, left: np.ndarray, right: np.ndarray) -> Frame:
+        """The frame of one rectified stereo pair (paper 3.1: objects in the camera frame, robot pose, velocities)."""
+        detections = self._timed("detection", self.detector.detect, index, left)
+        observations: list[ObjectObservation] = self._timed(
+            "stereo", self.triangulator.observe, left, right, detections
+        )
+        boxes = np.array([d.box for d in detections], dtype=np.float64).reshape(-1, 4)
+        pose = self._timed("odometry", self.motion.pose, index, left, right, boxes)
+        linear, angular = np.zeros(3), np.zeros(3)
+        if self._previous is not None:
+            stamps = np.array([self._previous[0], timestamp])
+            linear, angular = (v[1] for v in body_velocities(np.stack([self._previous[1], pose]), stamps))
+        self._previous = (timestamp, pose)
+        return Frame(index, timestamp, pose, linear, angular, tuple(observations))
+
+
+@dataclass
+class ImageDataset:
+    """A KITTI sequence seen through the front end; `frames()` is all the SLAM path sees."""
+
+    sequence: KittiSequence
+    front_end: StereoFrontEnd
+
+    @property
+    def name(self) -> str:
+        return self.sequence.name
+
+    @property
+    def ground_truth(self) -> Trajectory | None:
+        return self.sequence.ground_truth  # evaluation only
+
+    def __len__(self) -> int:
+        return len(self.sequence)
+
+    def frames(self) -> Iterator[Frame]:
+        for index, timestamp in enumerate(self.sequence.timestamps):
+            start = time.perf_counter()
+            left, right = self.sequence.stereo_pair(index)
+            self.front_end.times.add("read", time.perf_counter() - start)
+            yield self.front_end.frame(index, float(timestamp), left, right)
+
+
+def _pose_file_motion(path: Path, frames: int) -> PoseFileMotion:
+    trajectory = read_trajectory(path, "auto")
+    if len(trajectory) != frames:
+        raise InputError(path, f"{len(trajectory)} poses for the {frames} frames of the sequence")
+    return PoseFileMotion(trajectory)
+
+
+def open_front_end(
+    sequence: KittiSequence,
+    config: PerceptionConfig,
+    detections: Path | None = None,
+    odometry: Path | None = None,
+) -> ImageDataset:
+    """The front end the config asks for: YOLOX or a detections file, stereo odometry or a pose file."""
+    if detections is not None or config.detector.source == "file":
+        if detections is None:
+            raise ConfigError("perception.detector.source is 'file': give the detections with --detections FILE")
+        detector: ObjectDetector = DetectionsFile(detections, config.detector.classes)
+    else:
+        detector = YoloxDetector(config.detector)
+    if odometry is not None or config.odometry.source == "poses":
+        if odometry is None:
+            raise ConfigError("perception.odometry.source is 'poses': give the pose file with --odometry FILE")
+        motion: MotionSource = _pose_file_motion(odometry, len(sequence))
+    else:
+        motion = StereoMotion(StereoOdometry(sequence.camera, config.odometry))
+    triangulator = ObjectTriangulator(sequence.camera, config.stereo)
+    return ImageDataset(sequence, StereoFrontEnd(triangulator, detector, motion))

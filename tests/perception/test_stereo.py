@@ -1,0 +1,161 @@
+"""ORB stereo triangulation of objects: synthetic stereo pairs with known depth, and the real KITTI object pair
+checked against OpenCV's SGBM disparity inside the same boxes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from neoslam.config import CameraConfig
+from neoslam.perception.config import DetectorConfig, StereoObjectConfig
+from neoslam.perception.detector import Detection, YoloxDetector
+from neoslam.perception.stereo import ObjectTriangulator, match_stereo_keypoints, triangulate
+
+CAMERA = CameraConfig(fx=700.0, fy=700.0, cx=320.0, cy=120.0, width=640, height=240, baseline=0.5)
+OBJECT_BOX = np.array([300.0, 80.0, 420.0, 180.0])
+OBJECT_DISPARITY = 35.0  # 10 m
+BACKGROUND_DISPARITY = 5.0  # 70 m
+
+
+def _texture(shape: tuple[int, int], seed: int) -> np.ndarray:
+    noise = np.random.default_rng(seed).uniform(0, 255, shape).astype(np.float32)
+    return cv2.GaussianBlur(noise, (0, 0), 1.5)
+
+
+def _shifted(image: np.ndarray, shift: float) -> np.ndarray:
+    """The image moved left by a (sub-pixel) shift, as the right camera sees a fronto-parallel plane."""
+    warp = np.array([[1.0, 0.0, -shift], [0.0, 1.0, 0.0]])
+    return cv2.warpAffine(image, warp, (image.shape[1], image.shape[0]), flags=cv2.INTER_CUBIC)
+
+
+def synthetic_pair(object_disparity: float = OBJECT_DISPARITY) -> tuple[np.ndarray, np.ndarray]:
+    """A textured box-shaped plane at one depth in front of a textured background at another."""
+    shape = (CAMERA.height, CAMERA.width)
+    background, foreground = _texture(shape, 1), _texture(shape, 2)
+    mask = np.zeros(shape, np.float32)
+    x1, y1, x2, y2 = OBJECT_BOX.astype(int)
+    mask[y1:y2, x1:x2] = 1.0
+    left = mask * foreground + (1 - mask) * background
+    right_mask = _shifted(mask, object_disparity) > 0.5
+    right = np.where(right_mask, _shifted(foreground, object_disparity), _shifted(background, BACKGROUND_DISPARITY))
+    return np.clip(left, 0, 255).astype(np.uint8), np.clip(right, 0, 255).astype(np.uint8)
+
+
+def _car(box: np.ndarray) -> Detection:
+    return Detection("car", 0.9, box.astype(np.float64))
+
+
+def test_triangulate_inverts_the_projection() -> None:
+    points = np.array([[1.0, -0.5, 10.0], [-2.0, 0.3, 25.0]])
+    pixels = np.column_stack(
+        [CAMERA.fx * points[:, 0] / points[:, 2] + CAMERA.cx, CAMERA.fy * points[:, 1] / points[:, 2] + CAMERA.cy]
+    )
+    disparity = CAMERA.fx * CAMERA.baseline / points[:, 2]
+    np.testing.assert_allclose(triangulate(pixels, disparity, CAMERA), points, rtol=1e-12)
+
+
+@pytest.mark.parametrize("disparity", [35.0, 20.4, 12.7])
+def test_keypoint_disparities_are_sub_pixel(disparity: float) -> None:
+    left, right = synthetic_pair(disparity)
+    matches = match_stereo_keypoints(left, right, OBJECT_BOX, StereoObjectConfig())
+    on_object = np.all((matches.left >= OBJECT_BOX[:2] + 3) & (matches.left <= OBJECT_BOX[2:] - 3), axis=1)
+    assert on_object.sum() >= 20
+    errors = np.abs(matches.disparity[on_object] - disparity)
+    assert np.median(errors) < 0.15
+
+
+def test_object_centre_depth_and_boxes() -> None:
+    left, right = synthetic_pair()
+    (observation,) = ObjectTriangulator(CAMERA, StereoObjectConfig()).observe(left, right, [_car(OBJECT_BOX)])
+    depth = CAMERA.fx * CAMERA.baseline / OBJECT_DISPARITY
+    assert observation.center_camera[2] == pytest.approx(depth, rel=0.01)
+    # The centre sits near the box's middle ray (keypoints spread over the whole plane).
+    middle = (OBJECT_BOX[:2] + OBJECT_BOX[2:]) / 2
+    expected_xy = (middle - [CAMERA.cx, CAMERA.cy]) * depth / CAMERA.fx
+    np.testing.assert_allclose(observation.center_camera[:2], expected_xy, atol=0.15)
+    np.testing.assert_allclose(observation.box_right, OBJECT_BOX - [OBJECT_DISPARITY, 0, OBJECT_DISPARITY, 0], atol=0.5)
+    assert observation.patch.shape == (16, 16) and observation.patch.dtype == np.uint8
+    assert 0 < observation.depth_sigma < 0.05
+    assert observation.label == "car" and observation.score == 0.9
+
+
+def test_objects_out_of_range_untextured_or_cut_off_are_not_placed() -> None:
+    left, right = synthetic_pair()
+    near_only = StereoObjectConfig(max_depth=5.0)
+    assert ObjectTriangulator(CAMERA, near_only).observe(left, right, [_car(OBJECT_BOX)]) == []
+    flat = np.full_like(left, 128)
+    assert ObjectTriangulator(CAMERA, StereoObjectConfig()).observe(flat, flat, [_car(OBJECT_BOX)]) == []
+    at_border = np.array([0.0, 80.0, 120.0, 180.0])
+    assert ObjectTriangulator(CAMERA, StereoObjectConfig()).observe(left, right, [_car(at_border)]) == []
+    assert ObjectTriangulator(CAMERA, StereoObjectConfig()).observe(left, right, []) == []
+
+
+def test_background_keypoints_in_the_box_do_not_move_the_centre() -> None:
+    left, right = synthetic_pair()
+    wider = OBJECT_BOX + np.array([-25.0, -20.0, 25.0, 20.0])  # a loose box: background all around the object
+    (observation,) = ObjectTriangulator(CAMERA, StereoObjectConfig()).observe(left, right, [_car(wider)])
+    assert observation.center_camera[2] == pytest.approx(CAMERA.fx * CAMERA.baseline / OBJECT_DISPARITY, rel=0.02)
+
+
+def test_deterministic() -> None:
+    left, right = synthetic_pair()
+    triangulator = ObjectTriangulator(CAMERA, StereoObjectConfig())
+    first, second = (triangulator.observe(left, right, [_car(OBJECT_BOX)]) for _ in range(2))
+    np.testing.assert_array_equal(first[0].center_camera, second[0].center_camera)
+
+
+def _object_pair_camera(folder: Path) -> CameraConfig:
+    """P2 and P3 of the KITTI object calibration: the colour cameras of this pair."""
+    rows = {
+        line.split(":")[0]: np.array(line.split(":")[1].split(), float)
+        for line in (folder / "calib.txt").read_text().splitlines()
+        if ":" in line
+    }
+    p2, p3 = rows["P2"].reshape(3, 4), rows["P3"].reshape(3, 4)
+    fx = p2[0, 0]
+    return CameraConfig(
+        fx=fx, fy=p2[1, 1], cx=p2[0, 2], cy=p2[1, 2], width=1242, height=375, baseline=(p2[0, 3] - p3[0, 3]) / fx
+    )
+
+
+def _sgbm_depths(left: np.ndarray, right: np.ndarray, camera: CameraConfig, boxes: np.ndarray) -> np.ndarray:
+    """Depth of the median SGBM disparity in each box, leaving out the part of the box that a nearer box (by its own
+    SGBM median) covers: there the disparity is the nearer car's."""
+    sgbm = cv2.StereoSGBM_create(
+        0, 128, 5, P1=8 * 25, P2=32 * 25, uniquenessRatio=10, mode=cv2.STEREO_SGBM_MODE_SGBM_3WAY
+    )
+    disparity = sgbm.compute(left, right).astype(np.float32) / 16
+    masks = []
+    for x1, y1, x2, y2 in np.round(boxes).astype(int):
+        mask = np.zeros(disparity.shape, bool)
+        mask[y1:y2, x1:x2] = True
+        masks.append(mask)
+    whole = np.array([np.median(disparity[m & (disparity > 0)]) for m in masks])
+    medians = []
+    for k, mask in enumerate(masks):
+        hidden = (
+            np.any([masks[j] for j in np.flatnonzero(whole > whole[k])], axis=0) if (whole > whole[k]).any() else False
+        )
+        visible = mask & ~hidden & (disparity > 0)
+        medians.append(np.median(disparity[visible]))
+    return camera.fx * camera.baseline / np.array(medians)
+
+
+def test_real_cars_agree_with_sgbm_within_5_percent(shared_data: Path, yolox_model: Path) -> None:
+    folder = shared_data / "kitti_object_pair"
+    left_bgr, right_bgr = (cv2.imread(str(folder / name)) for name in ("left.png", "right.png"))
+    left, right = (cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) for image in (left_bgr, right_bgr))
+    camera = _object_pair_camera(folder)
+    config = DetectorConfig(model=yolox_model, tiling=True)
+    cars = [d for d in YoloxDetector(config).detect(0, left_bgr) if d.label == "car"]
+    assert len(cars) >= 5
+    observations = ObjectTriangulator(camera, StereoObjectConfig()).observe(left, right, cars)
+    assert len(observations) >= 4  # not placed: the car cut off by the image border, and any beyond 40 m
+    boxes = np.array([c.box for c in cars])
+    sgbm_depth = dict(zip(map(tuple, boxes), _sgbm_depths(left, right, camera, boxes), strict=True))
+    for observation in observations:
+        expected = sgbm_depth[tuple(observation.box_left)]
+        assert observation.center_camera[2] == pytest.approx(expected, rel=0.05), observation.box_left
