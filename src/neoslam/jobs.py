@@ -15,8 +15,8 @@ from neoslam.datasets.kitti import is_kitti_root, read_kitti_sequence
 from neoslam.datasets.simulated import is_simulated_dataset, read_dataset, write_dataset
 from neoslam.errors import ConfigError, InputError
 from neoslam.evaluation.report import cell_metrics, loop_metrics, timing_metrics, trajectory_metrics
-from neoslam.evaluation.trajectory_metrics import align, associate
-from neoslam.geometry import SimilarityTransform
+from neoslam.evaluation.trajectory_metrics import associate
+from neoslam.geometry import SimilarityTransform, fit_yaw_translation
 from neoslam.io.atomic import atomic_directory
 from neoslam.io.results import (
     read_loop_closures,
@@ -170,6 +170,13 @@ def _metrics(dataset: Dataset, result: RunResult, config: NeoSLAMConfig, wall_s:
     return metrics
 
 
+def _plot_alignment(estimate: Trajectory, truth: Trajectory) -> SimilarityTransform:
+    """Where an estimate is shown beside the truth: its best fit in yaw and translation. Gravity is known, and a
+    full 3-D rotation is ill-posed for a straight drive (it could roll the objects about the route)."""
+    fit = fit_yaw_translation(estimate.positions, truth.positions)
+    return SimilarityTransform(fit[:3, :3], fit[:3, 3])
+
+
 def _plots(folder: Path, result: RunResult, truth: Trajectory | None, threshold: float) -> None:
     folder.mkdir()
     if result.object_vector_cells.loss_history:
@@ -185,9 +192,11 @@ def _plots(folder: Path, result: RunResult, truth: Trajectory | None, threshold:
     estimates = {"odometry": result.odometry, "corrected": result.estimate}
     shown = SimilarityTransform(np.eye(3), np.zeros(3))
     if truth is not None and len(truth) >= MIN_ALIGNMENT_POSES:
-        # Show the estimates where they best fit the truth (the same SE(3) alignment as the ATE).
-        shown = align(result.estimate, truth, "se3")[1]
-        estimates = {"ground truth": truth} | {name: align(e, truth, "se3")[0] for name, e in estimates.items()}
+        shown = _plot_alignment(result.estimate, truth)
+        estimates = {"ground truth": truth} | {
+            name: Trajectory(e.timestamps, _plot_alignment(e, truth).apply_to_poses(e.poses))
+            for name, e in estimates.items()
+        }
         plot_error_along_route(
             folder / "error_along_route.png", truth, {k: estimates[k] for k in ("odometry", "corrected")}
         )
