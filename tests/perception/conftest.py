@@ -20,7 +20,7 @@ def yolox_detector(yolox_model: Path):
     """A YoloxDetector on the whole frame only (default config otherwise)."""
     from neoslam.perception.detector import YoloxDetector
 
-    return YoloxDetector(DetectorConfig(model=yolox_model))
+    return YoloxDetector(DetectorConfig(model=yolox_model, tiling=False))
 
 
 @pytest.fixture(scope="session")

@@ -15,6 +15,7 @@ from neoslam.perception.detector import (
     PAD_VALUE,
     Detection,
     YoloxDetector,
+    centred_tile_origins,
     decode,
     letterbox,
     load_class_names,
@@ -211,6 +212,14 @@ def test_tiling_finds_at_least_as_many_cars(
 ) -> None:
     image = request.getfixturevalue(image_name)
     assert _cars(yolox_tiling_detector.detect(0, image)) >= _cars(yolox_detector.detect(0, image))
+
+
+def test_central_tiles_cover_the_middle_of_the_frame() -> None:
+    assert centred_tile_origins(1226, 370, 1.0, 0.2) == tile_origins(1226, 370, 0.2)
+    first, second = centred_tile_origins(1226, 370, 0.5, 0.2)
+    assert (first, second + 370) == (306, 306 + 613)  # the band of 613 px, centred
+    assert centred_tile_origins(1226, 370, 0.1, 0.2) == [428]  # never narrower than one tile
+    assert centred_tile_origins(370, 370, 0.5, 0.2) == [0]
 
 
 def test_only_configured_classes_are_kept(yolox_model: Path, object_pair_left: np.ndarray) -> None:

@@ -18,6 +18,7 @@ CAMERA = CameraConfig(fx=700.0, fy=700.0, cx=320.0, cy=120.0, width=640, height=
 OBJECT_BOX = np.array([300.0, 80.0, 420.0, 180.0])
 OBJECT_DISPARITY = 35.0  # 10 m
 BACKGROUND_DISPARITY = 5.0  # 70 m
+MIN_UNHIDDEN_SHARE = 0.25  # a box less visible than this holds too little of its car for SGBM's median
 
 
 def _texture(shape: tuple[int, int], seed: int) -> np.ndarray:
@@ -121,41 +122,50 @@ def _object_pair_camera(folder: Path) -> CameraConfig:
     )
 
 
-def _sgbm_depths(left: np.ndarray, right: np.ndarray, camera: CameraConfig, boxes: np.ndarray) -> np.ndarray:
+def _sgbm_depths(
+    left: np.ndarray, right: np.ndarray, camera: CameraConfig, boxes: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Depth of the median SGBM disparity in each box, leaving out the part of the box that a nearer box (by its own
-    SGBM median) covers: there the disparity is the nearer car's."""
+    SGBM median) covers, since there the disparity is the nearer car's; and the share of the box left."""
     sgbm = cv2.StereoSGBM_create(
         0, 128, 5, P1=8 * 25, P2=32 * 25, uniquenessRatio=10, mode=cv2.STEREO_SGBM_MODE_SGBM_3WAY
     )
     disparity = sgbm.compute(left, right).astype(np.float32) / 16
+    valid = disparity > 0
     masks = []
     for x1, y1, x2, y2 in np.round(boxes).astype(int):
         mask = np.zeros(disparity.shape, bool)
         mask[y1:y2, x1:x2] = True
         masks.append(mask)
-    whole = np.array([np.median(disparity[m & (disparity > 0)]) for m in masks])
-    medians = []
+    whole = np.array([np.median(disparity[m & valid]) for m in masks])
+    depths, shares = [], []
     for k, mask in enumerate(masks):
-        hidden = (
-            np.any([masks[j] for j in np.flatnonzero(whole > whole[k])], axis=0) if (whole > whole[k]).any() else False
-        )
-        visible = mask & ~hidden & (disparity > 0)
-        medians.append(np.median(disparity[visible]))
-    return camera.fx * camera.baseline / np.array(medians)
+        visible = mask.copy()
+        for j in np.flatnonzero(whole > whole[k]):
+            visible &= ~masks[j]
+        shares.append(visible.sum() / mask.sum())
+        depths.append(camera.fx * camera.baseline / np.median(disparity[visible & valid]))
+    return np.array(depths), np.array(shares)
 
 
 def test_real_cars_agree_with_sgbm_within_5_percent(shared_data: Path, yolox_model: Path) -> None:
+    """The KITTI object pair: YOLOX with tiles finds its parked cars; every car placed whose box is at least a
+    quarter unhidden by nearer cars agrees with the dense SGBM disparity there. The range limit is lifted so that the
+    distant cars (50 m, 100 m) are checked too; the car cut off by the image border is not placed."""
     folder = shared_data / "kitti_object_pair"
     left_bgr, right_bgr = (cv2.imread(str(folder / name)) for name in ("left.png", "right.png"))
     left, right = (cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) for image in (left_bgr, right_bgr))
     camera = _object_pair_camera(folder)
-    config = DetectorConfig(model=yolox_model, tiling=True)
-    cars = [d for d in YoloxDetector(config).detect(0, left_bgr) if d.label == "car"]
+    cars = [
+        d for d in YoloxDetector(DetectorConfig(model=yolox_model, tiling=True)).detect(0, left_bgr) if d.label == "car"
+    ]
     assert len(cars) >= 5
-    observations = ObjectTriangulator(camera, StereoObjectConfig()).observe(left, right, cars)
-    assert len(observations) >= 4  # not placed: the car cut off by the image border, and any beyond 40 m
+    observations = ObjectTriangulator(camera, StereoObjectConfig(max_depth=120.0)).observe(left, right, cars)
     boxes = np.array([c.box for c in cars])
-    sgbm_depth = dict(zip(map(tuple, boxes), _sgbm_depths(left, right, camera, boxes), strict=True))
-    for observation in observations:
-        expected = sgbm_depth[tuple(observation.box_left)]
-        assert observation.center_camera[2] == pytest.approx(expected, rel=0.05), observation.box_left
+    depths, shares = _sgbm_depths(left, right, camera, boxes)
+    reference = {tuple(box): (depth, share) for box, depth, share in zip(boxes, depths, shares, strict=True)}
+    checked = [(o.center_camera[2], reference[tuple(o.box_left)]) for o in observations]
+    checked = [(depth, sgbm) for depth, (sgbm, share) in checked if share >= MIN_UNHIDDEN_SHARE]
+    assert len(checked) >= 5
+    for depth, sgbm in checked:
+        assert depth == pytest.approx(sgbm, rel=0.05)

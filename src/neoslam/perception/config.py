@@ -42,11 +42,19 @@ class DetectorConfig(_Section):
         "as two (car and truck): the lower score goes; 1 keeps both (a cyclist's person and bicycle overlap ~0.55)",
     )
     tiling: bool = Field(
-        False,
-        description="also run square tiles (side = image height) across the frame: finds small distant objects, "
-        "at about 5x the time",
+        True,
+        description="also run square tiles (side = image height) over the frame: finds small distant objects (on "
+        "kitti_mini 1.5x the cars, at 3x the detection time)",
     )
-    tile_overlap: float = Field(0.2, ge=0, lt=1, description="share of a tile that overlaps its neighbour")
+    tile_overlap: float = Field(0.2, ge=0, lt=1, description="least share of a tile that overlaps its neighbour")
+    tile_span: float = Field(
+        0.5,
+        gt=0,
+        le=1,
+        description="share of the image width, centred, that the tiles cover: distant objects gather about the "
+        "vanishing point (KITTI: 2 tiles for 88 % of the cars that 4 tiles across the whole width find, at 60 % "
+        "of the time)",
+    )
     min_box_height: float = Field(10.0, ge=0, description="smaller boxes are dropped, px")
     threads: int = Field(2, gt=0, description="onnxruntime intra-op threads")
 

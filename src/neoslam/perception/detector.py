@@ -33,6 +33,7 @@ __all__ = [
     "decode",
     "nms",
     "tile_origins",
+    "centred_tile_origins",
     "load_class_names",
 ]
 
@@ -161,6 +162,16 @@ def tile_origins(length: int, side: int, overlap: float) -> list[int]:
     return [round(o) for o in np.linspace(0, length - side, count)]
 
 
+def centred_tile_origins(length: int, side: int, span: float, overlap: float) -> list[int]:
+    """Start of each tile of `side` px over the centred band of `span` x `length` px (at least one tile wide).
+
+    Far objects gather about the vanishing point, near the image centre, so the band there gains most per tile.
+    """
+    band = min(max(round(span * length), side), length)
+    first = (length - band) // 2
+    return [first + origin for origin in tile_origins(band, side, overlap)] or [first]
+
+
 def load_class_names(model_path: Path, labels_file: Path | None) -> tuple[str, ...]:
     """The configured labels file, else coco_classes.txt beside the model, else COCO's 80 names."""
     path = labels_file if labels_file is not None else model_path.parent / LABELS_FILE_NAME
@@ -270,14 +281,15 @@ class YoloxDetector:
         return boxes[keep].astype(np.float64) / scale, scores[keep].astype(np.float64), class_ids[keep]
 
     def _detect_tiles(self, bgr: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """Detections of square tiles (side = image height, capped at the width) in image px.
+        """Detections of square tiles (side = image height, capped at the width) across the centred band of
+        `tile_span` x width, in image px.
 
         Boxes that touch a cut inside the image are dropped: they are truncated objects, which the whole frame
         or the overlapping neighbour tile sees whole.
         """
         height, width = bgr.shape[:2]
         side = min(height, width)
-        x_origins = tile_origins(width, side, self.config.tile_overlap) or [0]
+        x_origins = centred_tile_origins(width, side, self.config.tile_span, self.config.tile_overlap)
         y_origins = tile_origins(height, side, self.config.tile_overlap) or [0]
         if len(x_origins) * len(y_origins) == 1:
             return []  # a square image: its only tile is the whole frame, already run

@@ -199,16 +199,18 @@ class ObjectTriangulator:
         return np.column_stack([triangulate(matches.left, matches.disparity, self.camera), matches.left])
 
     def _visible_points(self, points: list[np.ndarray], boxes: np.ndarray) -> list[np.ndarray | None]:
-        """Each box's agreeing keypoints, leaving out the parts of the box that a nearer object's box covers: the
-        keypoints there belong to the nearer object (parked cars overlap in the image)."""
+        """Each box's agreeing keypoints, leaving out those that lie in another object's box at that object's
+        depth: where parked cars overlap in the image, the keypoints belong to the one in front, and a car mostly
+        hidden by a nearer one would otherwise take the nearer one's depth."""
         first = [_agreeing_points(box_points, self.config) for box_points in points]
-        depth = np.array([np.inf if a is None else np.median(a[:, 2]) for a in first])
         visible: list[np.ndarray | None] = []
         for k, box_points in enumerate(points):
-            nearer = np.flatnonzero(depth < depth[k] - self.config.min_depth_spread)
             hidden = np.zeros(len(box_points), bool)
-            for j in nearer:
-                hidden |= _in_box(box_points, boxes[j])
+            for j, other in enumerate(first):
+                if j == k or other is None:
+                    continue
+                depth, band = np.median(other[:, 2]), np.ptp(other[:, 2]) / 2
+                hidden |= _in_box(box_points, boxes[j]) & (np.abs(box_points[:, 2] - depth) <= band)
             visible.append(_agreeing_points(box_points[~hidden], self.config))
         return visible
 
