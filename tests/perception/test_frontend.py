@@ -134,6 +134,13 @@ def test_detections_file_feeds_the_front_end(
     assert car.label == "car" and 5 < car.center_camera[2] < 15
 
 
+def test_detections_beyond_the_sequence_are_refused(mini_sequence: KittiSequence, tmp_path: Path) -> None:
+    path = tmp_path / "other_sequence.jsonl"
+    write_detections_file(path, {3: [], 40: [Detection("car", 0.8, np.array([10.0, 10.0, 50.0, 40.0]))]})
+    with pytest.raises(InputError, match="frame 40 is beyond the 12 frames"):
+        open_front_end(mini_sequence, NeoSLAMConfig().perception, detections=path)
+
+
 def test_file_sources_named_in_config_need_their_files(mini_sequence: KittiSequence) -> None:
     config = NeoSLAMConfig().perception
     file_detector = config.model_copy(update={"detector": config.detector.model_copy(update={"source": "file"})})

@@ -139,6 +139,15 @@ class ImageDataset:
             yield self.front_end.frame(index, float(timestamp), left, right)
 
 
+def _detections_file(path: Path, config: PerceptionConfig, frames: int) -> DetectionsFile:
+    detections = DetectionsFile(path, config.detector.classes)
+    beyond = [frame for frame in detections.frames if frame >= frames]
+    if beyond:
+        # Most likely the detections of another sequence: refuse rather than drop them silently.
+        raise InputError(path, f"frame {beyond[0]} is beyond the {frames} frames of the sequence")
+    return detections
+
+
 def _pose_file_motion(path: Path, frames: int) -> PoseFileMotion:
     trajectory = read_trajectory(path, "auto")
     if len(trajectory) != frames:
@@ -156,7 +165,7 @@ def open_front_end(
     if detections is not None or config.detector.source == "file":
         if detections is None:
             raise ConfigError("perception.detector.source is 'file': give the detections with --detections FILE")
-        detector: ObjectDetector = DetectionsFile(detections, config.detector.classes)
+        detector: ObjectDetector = _detections_file(detections, config, len(sequence))
     else:
         detector = YoloxDetector(config.detector)
     if odometry is not None or config.odometry.source == "poses":
