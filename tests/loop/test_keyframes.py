@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -50,6 +51,20 @@ def test_a_near_view_dominates_a_far_one_by_inverse_variance() -> None:
     np.testing.assert_allclose(window.objects[0].position, expected, atol=1e-9)
     # (21 / 5.1)^4 = 287: the fused object sits within a few millimetres of the near view.
     assert np.linalg.norm(window.objects[0].position - near) < 0.01 * np.linalg.norm(far - near)
+
+
+def test_a_larger_measured_depth_sigma_replaces_the_model() -> None:
+    """The stereo front end's own uncertainty of a centre (few or scattered keypoints) weighs in where it is larger
+    than the depth model's; the simulator gives none."""
+    window = LocalObjectWindow(DEFAULTS)
+    first, second = np.array([10.0, 4.0, 0.0]), np.array([10.6, 4.0, 0.0])
+    uncertain = replace(_seen(first), depth_sigma=1.0)
+    precise = replace(_seen(second), depth_sigma=1e-6)  # smaller than the model's: the model stands
+    window.add(_at(0.0), (uncertain,), odometer_m=0.0)
+    window.add(_at(0.0), (precise,), odometer_m=0.0)
+    w_first, w_second = 1.0, 1 / (DEFAULTS.depth_sigma_at_1m * 10.6**2) ** 2
+    expected = (w_first * first + w_second * second) / (w_first + w_second)
+    np.testing.assert_allclose(window.objects[0].position, expected, atol=1e-9)
 
 
 def test_repeated_observations_fuse_only_within_the_association_radius() -> None:

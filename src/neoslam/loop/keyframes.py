@@ -47,8 +47,11 @@ class LocalObjectWindow:
         if observations:
             measured_depth = np.array([o.center_camera[2] for o in observations])
             world = transform_points(pose, camera_points_to_robot(self._object_centres(observations)))
-            # Stereo depth error grows with the measured depth squared: weight each view by its inverse variance.
-            weights = 1.0 / (self.config.depth_sigma_at_1m * measured_depth**2) ** 2
+            # Stereo depth error grows with the measured depth squared: weight each view by its inverse variance,
+            # or by the front end's own uncertainty of the centre where it measured a larger one.
+            sigma = self.config.depth_sigma_at_1m * measured_depth**2
+            measured_sigma = np.array([o.depth_sigma or 0.0 for o in observations])
+            weights = 1.0 / np.maximum(sigma, measured_sigma) ** 2
             for observation, point, weight in zip(observations, world, weights, strict=True):
                 self._fuse(observation, point, float(weight), odometer_m)
         horizon = odometer_m - self.config.window_length
