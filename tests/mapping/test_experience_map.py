@@ -18,11 +18,7 @@ RING = 36
 VELOCITIES = (np.array([1.0, 0.0, 0.0]), np.zeros(3))
 CONFIG = ExperienceMapConfig()  # similarity_threshold 3 cells, gc_distance_threshold 7 cells, mu 1 and 1
 
-# A square driven once and back to its start, dead-reckoned with a yaw bias; a keyframe every KEYFRAME_EVERY frames.
-SIDE = 25
-LAP = 4 * SIDE
-STEP_M = 1.0
-YAW_BIAS_RAD = 0.002
+# The yaw-biased square (conftest.py) is driven once and back to its start; a keyframe every KEYFRAME_EVERY frames.
 KEYFRAME_EVERY = 5
 
 
@@ -36,26 +32,6 @@ def cells(grid=(0.0, 0.0, 0.0), head_direction: float = 0.0) -> CellState:
 
 def new_map(**update) -> ExperienceMap:
     return ExperienceMap(CONFIG.model_copy(update=update), DIMS, RING)
-
-
-def square_truth() -> np.ndarray:
-    """LAP + 1 poses: once around a square turning left, ending where it started."""
-    poses, position, yaw = [], np.zeros(3), 0.0
-    for _ in range(4):
-        for _ in range(SIDE):
-            poses.append(pose(yaw, position))
-            position = position + STEP_M * np.array([np.cos(yaw), np.sin(yaw), 0.0])
-        yaw += np.pi / 2
-    poses.append(pose(yaw, position))
-    return np.array(poses)
-
-
-def dead_reckoned(truth: np.ndarray) -> np.ndarray:
-    steps = relative_pose(truth[:-1], truth[1:]) @ pose(YAW_BIAS_RAD)
-    odometry = [truth[0]]
-    for step in steps:
-        odometry.append(odometry[-1] @ step)
-    return np.array(odometry)
 
 
 def drive(experience_map: ExperienceMap, odometry: np.ndarray) -> None:
@@ -78,17 +54,18 @@ def closure(query_keyframe: int, match_keyframe: int, relative: np.ndarray) -> L
     )
 
 
-def driven_square(backend: str) -> tuple[ExperienceMap, np.ndarray, np.ndarray]:
-    truth = square_truth()
-    odometry = dead_reckoned(truth)
+def driven_square(square, backend: str) -> tuple[ExperienceMap, np.ndarray, np.ndarray]:
+    """The map of one lap of the biased `square` and back to its start (lap + 1 frames), with its truth and odometry."""
+    truth = square.truth(closed=True)
+    odometry = square.dead_reckoned(truth)
     experience_map = new_map(backend=backend)
     drive(experience_map, odometry)
     return experience_map, truth, odometry
 
 
-def loop_back_to_start(truth: np.ndarray) -> LoopClosure:
+def loop_back_to_start(square, truth: np.ndarray) -> LoopClosure:
     """The last keyframe (back at the start) recognises keyframe 0, with the true relative pose."""
-    return closure(LAP // KEYFRAME_EVERY, 0, relative_pose(truth[0], truth[LAP]))
+    return closure(square.lap // KEYFRAME_EVERY, 0, relative_pose(truth[0], truth[square.lap]))
 
 
 def ate(poses: np.ndarray, truth: np.ndarray) -> float:
@@ -189,9 +166,9 @@ def test_similarity_is_circular() -> None:
     assert experience_map.similarity(cells((17, 0, 17), 35), stored) == pytest.approx(18.0)
 
 
-def test_each_new_experience_is_linked_to_the_previous_by_the_odometry() -> None:
-    truth = square_truth()[:40]
-    odometry = dead_reckoned(truth)
+def test_each_new_experience_is_linked_to_the_previous_by_the_odometry(biased_square) -> None:
+    truth = biased_square.truth()[:40]
+    odometry = biased_square.dead_reckoned(truth)
     experience_map = new_map()
     drive(experience_map, odometry)
 
@@ -204,7 +181,8 @@ def test_each_new_experience_is_linked_to_the_previous_by_the_odometry() -> None
         np.testing.assert_allclose(
             link.relative, relative_pose(odometry[source.frame_index], odometry[target.frame_index]), atol=1e-12
         )
-        assert link.distance_m == pytest.approx(KEYFRAME_EVERY * STEP_M)  # travelled since the previous experience
+        # travelled since the previous experience
+        assert link.distance_m == pytest.approx(KEYFRAME_EVERY * biased_square.step_m)
     # uncorrected, the map is the odometry
     np.testing.assert_allclose(experience_map.graph.poses, odometry[[e.frame_index for e in experiences]], atol=1e-9)
     np.testing.assert_allclose(experience_map.graph.link_residuals(), 0.0, atol=1e-9)
@@ -289,23 +267,23 @@ def test_a_closure_of_an_unknown_keyframe_is_neither_accepted_nor_rejected() -> 
     assert len(experience_map.graph.links) == 1
 
 
-def test_a_rejected_closure_leaves_the_map() -> None:
+def test_a_rejected_closure_leaves_the_map(biased_square) -> None:
     for backend in ("relaxation", "pose-graph"):
-        experience_map, truth, _ = driven_square(backend)
+        experience_map, truth, _ = driven_square(biased_square, backend)
         before = experience_map.graph.poses.copy()
-        assert not experience_map.close_loop(loop_back_to_start(truth), cells((18, 18, 18)))
+        assert not experience_map.close_loop(loop_back_to_start(biased_square, truth), cells((18, 18, 18)))
         experience_map.correct()
         np.testing.assert_array_equal(experience_map.graph.poses, before)
         assert all(k.kind == "odometry" for k in experience_map.graph.links)
 
 
-def test_pose_graph_backend_corrects_the_map_at_once() -> None:
-    experience_map, truth, odometry = driven_square("pose-graph")
+def test_pose_graph_backend_corrects_the_map_at_once(biased_square) -> None:
+    experience_map, truth, odometry = driven_square(biased_square, "pose-graph")
     frames = [e.frame_index for e in experience_map.experiences]
-    drift_gap = np.linalg.norm(odometry[LAP, :3, 3] - odometry[0, :3, 3])
+    drift_gap = np.linalg.norm(odometry[biased_square.lap, :3, 3] - odometry[0, :3, 3])
     drift_ate = ate(experience_map.graph.poses, truth[frames])
 
-    assert experience_map.close_loop(loop_back_to_start(truth), cells())
+    assert experience_map.close_loop(loop_back_to_start(biased_square, truth), cells())
 
     assert drift_gap > 1.0
     # a least-squares compromise (loop_sigma 0.5 m against 20 odometry links), not an exact fit
@@ -316,15 +294,15 @@ def test_pose_graph_backend_corrects_the_map_at_once() -> None:
     np.testing.assert_array_equal(experience_map.graph.poses, before)
 
 
-def test_relaxation_backend_corrects_the_map_frame_by_frame() -> None:
-    experience_map, truth, _ = driven_square("relaxation")
+def test_relaxation_backend_corrects_the_map_frame_by_frame(biased_square) -> None:
+    experience_map, truth, _ = driven_square(biased_square, "relaxation")
     frames = [e.frame_index for e in experience_map.experiences]
     experience_map.correct()  # no loop yet: nothing to relax
     np.testing.assert_allclose(experience_map.graph.link_residuals(), 0.0, atol=1e-9)
     before = experience_map.graph.poses.copy()
     drift_ate = ate(before, truth[frames])
 
-    assert experience_map.close_loop(loop_back_to_start(truth), cells())
+    assert experience_map.close_loop(loop_back_to_start(biased_square, truth), cells())
     np.testing.assert_array_equal(experience_map.graph.poses, before)  # the closure alone moves nothing
     gap = experience_map.graph.link_residuals()[-1]
     experience_map.correct()
@@ -341,8 +319,8 @@ def test_relaxation_backend_corrects_the_map_frame_by_frame() -> None:
 # Trajectory and keyframe points
 
 
-def test_trajectory_without_correction_is_the_odometry() -> None:
-    experience_map, _, odometry = driven_square("relaxation")
+def test_trajectory_without_correction_is_the_odometry(biased_square) -> None:
+    experience_map, _, odometry = driven_square(biased_square, "relaxation")
     stamps = 0.1 * np.arange(len(odometry))
     trajectory = experience_map.trajectory(stamps, odometry)
     assert len(trajectory) == len(odometry)
@@ -350,9 +328,9 @@ def test_trajectory_without_correction_is_the_odometry() -> None:
     np.testing.assert_allclose(trajectory.poses, odometry, atol=1e-9)
 
 
-def test_trajectory_frames_follow_their_experience() -> None:
-    experience_map, truth, odometry = driven_square("pose-graph")
-    experience_map.close_loop(loop_back_to_start(truth), cells())
+def test_trajectory_frames_follow_their_experience(biased_square) -> None:
+    experience_map, truth, odometry = driven_square(biased_square, "pose-graph")
+    experience_map.close_loop(loop_back_to_start(biased_square, truth), cells())
     stamps = 0.1 * np.arange(len(odometry))
 
     trajectory = experience_map.trajectory(stamps, odometry)

@@ -16,12 +16,6 @@ CORRECTION = 0.5  # NeuroSLAM's EXP_CORRECTION
 PASSES = 5  # NeuroSLAM's EXP_LOOPS
 CALLS = 200  # relax() calls, as if once per frame after the closure
 
-# The yaw-biased square of test_pose_graph.py (copied: tests are not a package under --import-mode=importlib).
-SIDE_NODES = 25  # nodes along each side of the square
-STEP_M = 1.0
-LAP = 4 * SIDE_NODES
-YAW_BIAS_RAD = 0.002  # per odometry step: 0.2 rad (11 degrees) over one lap
-
 
 def pose(yaw: float, translation, roll: float = 0.0, pitch: float = 0.0) -> np.ndarray:
     return make_pose(Rotation.from_euler("ZYX", [yaw, pitch, roll]), np.asarray(translation, dtype=float))
@@ -41,33 +35,6 @@ def graph_of(poses: np.ndarray, pairs: list[tuple[int, int]], truth: np.ndarray 
     for source, target in pairs:
         graph.add_link(Link(source, target, relative_pose(truth[source], truth[target]), "odometry", 1.0))
     return graph
-
-
-def square_truth() -> np.ndarray:
-    """True poses driving once around a square, turning left 90 degrees after each side."""
-    poses, position, yaw = [], np.zeros(3), 0.0
-    for _ in range(4):
-        for _ in range(SIDE_NODES):
-            poses.append(pose(yaw, position))
-            position = position + STEP_M * np.array([np.cos(yaw), np.sin(yaw), 0.0])
-        yaw += np.pi / 2
-    return np.array(poses)
-
-
-def biased_graph(truth: np.ndarray, loops: list[tuple[int, int, np.ndarray]]) -> MapGraph:
-    """Nodes at the dead-reckoned poses of yaw-biased odometry, odometry links, then the given loop links."""
-    measured = relative_pose(truth[:-1], truth[1:]) @ pose(YAW_BIAS_RAD, (0.0, 0.0, 0.0))
-    graph = MapGraph(poses=truth[:1].copy())
-    for index, step in enumerate(measured):
-        graph.add_node(graph.poses[-1] @ step)
-        graph.add_link(Link(index, index + 1, step, "odometry", float(np.linalg.norm(step[:3, 3]))))
-    for source, target, relative in loops:
-        graph.add_link(Link(source, target, relative, "loop", 0.0))
-    return graph
-
-
-def true_loop(truth: np.ndarray, source: int, target: int) -> tuple[int, int, np.ndarray]:
-    return source, target, relative_pose(truth[source], truth[target])
 
 
 def ate(poses: np.ndarray, truth: np.ndarray) -> float:
@@ -124,9 +91,9 @@ def test_link_measurement_of_a_sloped_source_is_in_its_yaw_frame() -> None:
 # relax
 
 
-def test_relax_closes_a_yaw_biased_square() -> None:
-    truth = square_truth()
-    graph = biased_graph(truth, [true_loop(truth, LAP - 1, 0)])
+def test_relax_closes_a_yaw_biased_square(biased_square) -> None:
+    truth = biased_square.truth()
+    graph = biased_square.graph(truth, [biased_square.loop(truth, biased_square.lap - 1, 0)])
     measurements = [link_measurement(graph, link) for link in graph.links]
     drift_ate = ate(graph.poses, truth)
     drift_gap = graph.link_residuals()[-1]
@@ -140,9 +107,9 @@ def test_relax_closes_a_yaw_biased_square() -> None:
     assert ate(graph.poses, truth) < drift_ate / 10
 
 
-def test_relaxation_goes_on_improving_with_more_calls() -> None:
-    truth = square_truth()
-    graph = biased_graph(truth, [true_loop(truth, LAP - 1, 0)])
+def test_relaxation_goes_on_improving_with_more_calls(biased_square) -> None:
+    truth = biased_square.truth()
+    graph = biased_square.graph(truth, [biased_square.loop(truth, biased_square.lap - 1, 0)])
     measurements = [link_measurement(graph, link) for link in graph.links]
     errors = [ate(graph.poses, truth)]
     for _ in range(4):
@@ -152,9 +119,9 @@ def test_relaxation_goes_on_improving_with_more_calls() -> None:
     assert all(later < earlier for earlier, later in zip(errors, errors[1:], strict=False))
 
 
-def test_relax_without_links_or_passes_leaves_the_poses() -> None:
-    truth = square_truth()
-    graph = biased_graph(truth, [true_loop(truth, LAP - 1, 0)])
+def test_relax_without_links_or_passes_leaves_the_poses(biased_square) -> None:
+    truth = biased_square.truth()
+    graph = biased_square.graph(truth, [biased_square.loop(truth, biased_square.lap - 1, 0)])
     measurements = [link_measurement(graph, link) for link in graph.links]
     before = graph.poses.copy()
 
@@ -174,9 +141,9 @@ def test_relax_of_consistent_links_leaves_the_poses() -> None:
     np.testing.assert_allclose(graph.poses, poses, atol=1e-9)
 
 
-def test_relax_corrects_in_place() -> None:
-    truth = square_truth()
-    graph = biased_graph(truth, [true_loop(truth, LAP - 1, 0)])
+def test_relax_corrects_in_place(biased_square) -> None:
+    truth = biased_square.truth()
+    graph = biased_square.graph(truth, [biased_square.loop(truth, biased_square.lap - 1, 0)])
     poses = graph.poses
     relax(graph, [link_measurement(graph, link) for link in graph.links], CORRECTION, PASSES)
     assert graph.poses is poses
@@ -246,10 +213,10 @@ def test_a_perturbed_left_curve_relaxes_back_to_a_left_curve() -> None:
     assert relative_pose(graph.poses[0], graph.poses[3])[1, 3] > 5.0  # the end is to the left of the start
 
 
-def test_relaxation_keeps_the_centroid() -> None:
+def test_relaxation_keeps_the_centroid(biased_square) -> None:
     """Each correction moves the two ends of a link by equal and opposite amounts: the map does not slide."""
-    truth = square_truth()
-    graph = biased_graph(truth, [true_loop(truth, LAP - 1, 0)])
+    truth = biased_square.truth()
+    graph = biased_square.graph(truth, [biased_square.loop(truth, biased_square.lap - 1, 0)])
     measurements = [link_measurement(graph, link) for link in graph.links]
     centroid = graph.poses[:, :3, 3].mean(axis=0)
 
