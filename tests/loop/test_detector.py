@@ -11,7 +11,7 @@ import pytest
 from neoslam.config import EvaluationConfig, KeyframeConfig, MatchingConfig, NeoSLAMConfig, SimulatorConfig
 from neoslam.datasets.simulated import read_dataset, write_dataset
 from neoslam.evaluation.loops import LoopCriteria, evaluate_closures
-from neoslam.geometry import invert_pose, planar_motion, rotation_angle, transform_points
+from neoslam.geometry import invert_pose, make_pose, planar_motion, rotation_angle, transform_points
 from neoslam.loop.detector import LoopClosureDetector
 from neoslam.loop.keyframes import KeyframeBuilder
 from neoslam.loop.matching import match_keyframes
@@ -54,11 +54,11 @@ class TwoPasses:
         self.next_id += 1
         return keyframe
 
-    def first_pass(self, detector: LoopClosureDetector) -> list[np.ndarray]:
+    def first_pass(self, detector: LoopClosureDetector, drift: np.ndarray | None = None) -> list[np.ndarray]:
         poses = []
         for i, x in enumerate(FIRST_PASS):
             pose = self.yaw_pose(0.0, (x, 0.0, CAMERA_HEIGHT))
-            keyframe = self.keyframe(pose, np.eye(4), frame=10 * i)
+            keyframe = self.keyframe(pose, np.eye(4) if drift is None else drift, frame=10 * i)
             assert detector.query(keyframe, 5.0 * i) == []  # nothing old enough to close a loop with
             detector.add(keyframe, 5.0 * i)
             poses.append(pose)
@@ -123,6 +123,38 @@ def test_a_revisit_is_accepted_once_two_keyframes_agree(passes: TwoPasses, yaw: 
         expected = invert_pose(stored_poses[stored]) @ true_pose
         np.testing.assert_allclose(c.relative_pose[:3, 3], expected[:3, 3], atol=0.25)
         assert np.degrees(rotation_angle(c.relative_pose[:3, :3].T @ expected[:3, :3])) < 1.0
+
+
+def _turned_about(point: np.ndarray, yaw: float) -> np.ndarray:
+    """A rotation by `yaw` about the vertical through `point`."""
+    rotation = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
+    return make_pose(rotation, point - rotation @ point)
+
+
+def test_consistency_is_judged_at_the_place_not_at_the_world_origin(passes: TwoPasses) -> None:
+    # The street lies kilometres from the origin of the estimated world, as after a long drive, and consecutive
+    # fits differ by 0.5° of yaw about the keyframe (what noisy object centres do to a fit). Both put the robot at
+    # the same place; only at the far-away origin do the transforms differ by many metres.
+    far = make_pose(np.eye(3), np.array([3000.0, 2000.0, 0.0]))  # odometry frame of both passes
+    detector = LoopClosureDetector(KEYFRAMES, MATCHING)
+    passes.first_pass(detector, drift=far)
+    xs = np.arange(20.0, 81.0, 5.0)
+    base = far @ passes.yaw_pose(DRIFT_YAW, DRIFT)
+    drifts = []
+    for j, x in enumerate(xs):
+        place = (base @ passes.second_pass_pose(x))[:3, 3]
+        drifts.append(_turned_about(place, np.radians(0.25 if j % 2 else -0.25)) @ base)
+    at_origin = drifts[0] @ invert_pose(drifts[1])  # how the two relocalisations' transforms differ at the origin
+    assert np.linalg.norm(at_origin[:3, 3]) > 10 * MATCHING.consistent_distance
+
+    accepted, _ = _second_pass(passes, detector, xs, drifts=drifts)
+    first_query = len(FIRST_PASS)
+    assert [[c.query_keyframe for c in closures] for closures in accepted] == [
+        [],
+        [first_query, first_query + 1],
+        *[[first_query + j] for j in range(2, len(xs))],
+    ]
+    assert all(c.match_keyframe == _stored_at(x) for c, x in zip(sum(accepted, []), xs, strict=True))
 
 
 def test_an_isolated_relocalisation_is_not_accepted(passes: TwoPasses, make_street) -> None:

@@ -105,6 +105,41 @@ def test_principal_eigenvector_is_that_of_eigh(seed: int) -> None:
     np.testing.assert_allclose(vector, expected, atol=1e-6)
 
 
+def test_principal_eigenvector_stops_after_the_given_products() -> None:
+    matrix = np.array([[0.0, 1.0, 0.5], [1.0, 0.0, 0.2], [0.5, 0.2, 0.0]])
+    one_product = (matrix + np.eye(3)) @ np.ones(3)
+    np.testing.assert_allclose(principal_eigenvector(matrix, iterations=1), one_product / np.linalg.norm(one_product))
+    exact = np.abs(np.linalg.eigh(matrix)[1][:, -1])
+    loose = principal_eigenvector(matrix, iterations=1000, tolerance=1e-3)
+    assert 0 < np.abs(loose - exact).max() < 1e-2  # stopped early, near the eigenvector
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_default_power_iteration_chooses_what_the_exact_eigenvector_chooses(
+    make_keyframe, make_street, make_yaw_pose, seed: int
+) -> None:
+    # A matching problem as the detector meets it: a noisy, permuted copy of a street with two strangers.
+    rng = np.random.default_rng(seed)
+    street = make_street(rng, count=14, length=60.0)
+    stored = make_keyframe(street.centers, street.labels, street.patches(rng, range(14)))
+    centres, labels, patches, _ = _query_of(street, rng, rng.choice(14, 11, replace=False), make_yaw_pose(1.0))
+    exact = CONFIG.model_copy(update={"power_iterations": 10_000, "power_tolerance": 1e-12})
+    copy = make_keyframe(centres, labels, patches)
+    candidates = candidate_assignments(copy, stored, CONFIG)
+    affinity = affinity_matrix(copy, stored, candidates, E_MAX)
+    np.testing.assert_array_equal(
+        spectral_matching(affinity, candidates, CONFIG), spectral_matching(affinity, candidates, exact)
+    )
+    assert match_keyframes(copy, stored, CONFIG, E_MAX).verified
+    # Another street with the same classes and looks: no group of assignments dominates, the iteration is cut
+    # short and the order of its entries may differ, but not the verdict.
+    other = make_keyframe(
+        make_street(rng, count=14, length=60.0).centers, street.labels, street.patches(rng, range(14))
+    )
+    cut_short = match_keyframes(other, stored, CONFIG, E_MAX)
+    assert cut_short.verified == match_keyframes(other, stored, exact, E_MAX).verified
+
+
 def test_principal_eigenvector_of_nothing_is_zero() -> None:
     np.testing.assert_array_equal(principal_eigenvector(np.zeros((4, 4))), np.zeros(4))
 
@@ -239,6 +274,39 @@ def test_min_inlier_ratio_is_enforced(make_keyframe, make_street, shared: int, r
     match = match_keyframes(query, stored, CONFIG.model_copy(update={"min_inlier_ratio": ratio}), E_MAX)
     assert match.n_matches == shared
     assert match.verified is verified
+
+
+@pytest.mark.parametrize(("inlier_distance", "verified"), [(1.5, False), (CONFIG.inlier_distance, True)])
+def test_objects_a_metre_off_are_left_out_of_the_fit(
+    make_keyframe, make_street, inlier_distance: float, verified: bool
+) -> None:
+    # Eight objects seen again, two of them with centres 1.45 m off in opposite directions (a truck seen from its
+    # other end, an object on a cross street): the six others fit exactly.
+    query, stored = _copy(make_keyframe, make_street, np.random.default_rng(5), 8, 8)
+    moved = query.centers.copy()
+    moved[[2, 5]] += [[1.45, 0.0, 0.0], [-1.45, 0.0, 0.0]]
+    query = make_keyframe(moved, query.labels, query.patches)
+    match = match_keyframes(query, stored, CONFIG.model_copy(update={"inlier_distance": inlier_distance}), E_MAX)
+    assert match.verified is verified
+    if verified:  # the six, with a residual of a perfect copy
+        assert sorted(match.pairs[:, 0].tolist()) == [0, 1, 3, 4, 6, 7] and match.residual_rms < 1e-6
+    else:  # all eight kept: the two off ones lift the RMS over the limit
+        assert match.n_matches == 8 and match.residual_rms > CONFIG.max_fit_residual
+
+
+def test_a_match_short_of_the_needed_count_is_given_up_before_the_fit(make_keyframe, make_street, monkeypatch) -> None:
+    fits = []
+
+    def counted_fit(query, stored):
+        fits.append(len(query))
+        return fit_yaw_translation(query, stored)
+
+    monkeypatch.setattr("neoslam.loop.matching.fit_yaw_translation", counted_fit)
+    short, stored = _copy(make_keyframe, make_street, np.random.default_rng(6), 10, 6)  # 6 of 10 shared, 7 needed
+    match = match_keyframes(short, stored, CONFIG, E_MAX)
+    assert not match.verified and match.n_matches == 6 and fits == []
+    enough, stored = _copy(make_keyframe, make_street, np.random.default_rng(7), 10, 7)
+    assert match_keyframes(enough, stored, CONFIG, E_MAX).verified and fits == [7]
 
 
 @pytest.mark.parametrize("k", [4, 6, 9])

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from neoslam.config import KeyframeConfig, MatchingConfig
-from neoslam.geometry import invert_pose, rotation_angle
+from neoslam.geometry import invert_pose, rotation_angle, transform_points
 from neoslam.loop.index import KeyframeIndex
 from neoslam.loop.matching import KeyframeMatch, match_keyframes
 from neoslam.types import Keyframe, LoopClosure
@@ -23,6 +23,7 @@ PASS_NEIGHBOURS = 3  # stored keyframes this close in id to a match belong to th
 @dataclass(frozen=True)
 class _Relocalisation:
     keyframe_id: int
+    position: np.ndarray  # (3,) of the query keyframe's robot, query world
     transform: np.ndarray  # query world -> stored world
     closure: LoopClosure
 
@@ -84,14 +85,22 @@ class LoopClosureDetector:
             closure, offset = self._closure(keyframe, match)
             same_place = np.linalg.norm(offset[:2]) <= self.config.max_place_offset
             if same_place and abs(offset[2]) <= self.config.max_vertical_offset:
-                return _Relocalisation(keyframe.id, match.transform, closure)
+                return _Relocalisation(keyframe.id, keyframe.pose[:3, 3].copy(), match.transform, closure)
         return None
 
     def _consistent(self, a: _Relocalisation, b: _Relocalisation) -> bool:
-        difference = invert_pose(a.transform) @ b.transform
+        """Whether two relocalisations put the robot at the same place: compared where the two keyframes were made,
+        not at the world origin. The fits' yaw is only known to a few tenths of a degree, and after a few km of
+        travel the world origin is that many km away: at the origin, a 0.3° difference alone moves the transform
+        by metres, though both fits agree on the place to a few centimetres."""
+        places = np.array([a.position, b.position])
+        disagreement = np.linalg.norm(
+            transform_points(a.transform, places) - transform_points(b.transform, places), axis=1
+        )
+        yaw_difference = rotation_angle(a.transform[:3, :3].T @ b.transform[:3, :3])
         return bool(
-            np.linalg.norm(difference[:3, 3]) <= self.config.consistent_distance
-            and np.degrees(rotation_angle(difference[:3, :3])) <= self.config.consistent_yaw_deg
+            disagreement.max() <= self.config.consistent_distance
+            and np.degrees(yaw_difference) <= self.config.consistent_yaw_deg
         )
 
     def query(self, keyframe: Keyframe, odometer_m: float) -> list[LoopClosure]:

@@ -7,9 +7,10 @@ their objects; X* = argmax Xᵀ M X (eq. 5) is approximated by spectral matching
 then a greedy discretisation that takes candidates in order of their weight and drops those in conflict.
 
 Verification keeps precision: a match must be supported by other matches with consistent distances, then a
-rigid 4-DoF fit (yaw, translation) of the matched centres must explain at least `min_inliers` of them within
-`inlier_distance` in the ground plane with a small RMS residual. The fit is also the metric constraint between
-the two keyframes.
+rigid 4-DoF fit (yaw, translation) of the matched centres must explain at least `min_inliers` of them (and
+`min_inlier_ratio` of the smaller keyframe) within `inlier_distance` in the ground plane with a small RMS residual.
+The fit is also the metric constraint between the two keyframes. Most pairs of keyframes share no place: a match
+that can no longer reach the number of matches it needs is given up as soon as that shows, before or during the fit.
 """
 
 from __future__ import annotations
@@ -31,9 +32,6 @@ __all__ = [
     "match_keyframes",
 ]
 
-POWER_ITERATIONS = 100
-POWER_TOLERANCE = 1e-9
-
 
 @dataclass(frozen=True)
 class KeyframeMatch:
@@ -42,7 +40,7 @@ class KeyframeMatch:
     query: int
     match: int
     score: float  # X*ᵀ M X / e_max of the spectral solution: about the number of consistent pairs (paper: > 1)
-    pairs: np.ndarray  # (k, 2) verified (query object, stored object) index pairs
+    pairs: np.ndarray  # (k, 2) (query object, stored object) index pairs: verified, or as far as matching got
     transform: np.ndarray  # (4, 4) maps query world points onto the stored keyframe's world points
     residual_rms: float  # m, of the verified pairs under `transform`
     verified: bool
@@ -77,36 +75,36 @@ def affinity_matrix(query: Keyframe, stored: Keyframe, candidates: np.ndarray, e
     return affinity
 
 
-def principal_eigenvector(affinity: np.ndarray) -> np.ndarray:
+def principal_eigenvector(affinity: np.ndarray, iterations: int = 100, tolerance: float = 1e-9) -> np.ndarray:
     """Power iteration from the all-ones vector: M is symmetric and non-negative, so the principal eigenvector is
     non-negative (Perron-Frobenius) and converges in a few dozen products, far cheaper than a full eigensolver.
     Iterating on M + I keeps the same eigenvectors and breaks the tie of eigenvalues +λ and −λ (a bipartite
-    consistency graph), on which plain iteration oscillates."""
+    consistency graph), on which plain iteration oscillates. Stops after `iterations` products or once no entry
+    moves by more than `tolerance`."""
     if not affinity.any():  # no pair of assignments agrees: nothing to rank
         return np.zeros(len(affinity))
     vector = np.full(len(affinity), 1.0 / np.sqrt(len(affinity)))
-    for _ in range(POWER_ITERATIONS):
+    for _ in range(iterations):
         product = affinity @ vector + vector
-        norm = np.linalg.norm(product)
-        if norm == 0:
-            return np.zeros_like(vector)
-        product /= norm
-        if np.abs(product - vector).max() < POWER_TOLERANCE:
+        product /= np.sqrt(product @ product)  # never 0: (M + I) v >= v for the non-negative v
+        if np.abs(product - vector).max() < tolerance:
             return product
         vector = product
     return vector
 
 
-def spectral_matching(affinity: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+def spectral_matching(affinity: np.ndarray, candidates: np.ndarray, config: MatchingConfig | None = None) -> np.ndarray:
     """Indices into `candidates` of X* (eq. 5): principal eigenvector, then greedy conflict-free discretisation."""
     if len(candidates) == 0:
         return np.empty(0, dtype=int)
-    weight = principal_eigenvector(affinity)
+    config = config or MatchingConfig()
+    weight = principal_eigenvector(affinity, config.power_iterations, config.power_tolerance)
     chosen: list[int] = []
     used_query: set[int] = set()
     used_stored: set[int] = set()
+    most = min(len(np.unique(candidates[:, 0])), len(np.unique(candidates[:, 1])))  # one side is used up
     for index in np.argsort(-weight, kind="stable"):
-        if weight[index] <= 0:
+        if weight[index] <= 0 or len(chosen) == most:
             break
         i, j = candidates[index]
         if i in used_query or j in used_stored:
@@ -128,19 +126,24 @@ def _supported(affinity: np.ndarray, chosen: np.ndarray, min_support: int) -> np
     return keep
 
 
+def _required_matches(query: Keyframe, stored: Keyframe, config: MatchingConfig) -> float:
+    """Verified matches needed: `min_inliers`, and `min_inlier_ratio` of the smaller keyframe's objects."""
+    return max(config.min_inliers, 2, config.min_inlier_ratio * min(len(query.labels), len(stored.labels)))
+
+
 def _horizontal_residuals(transform: np.ndarray, query: np.ndarray, stored: np.ndarray) -> np.ndarray:
     """Distances in the ground plane: objects stand on the road at similar heights, so height carries little
     about a place, and vertical odometry (and KITTI's ground truth in height) is the least reliable axis."""
     return np.linalg.norm(transform_points(transform, query)[:, :2] - stored[:, :2], axis=1)
 
 
-def _fit(query: np.ndarray, stored: np.ndarray, config: MatchingConfig) -> tuple[np.ndarray, np.ndarray]:
+def _fit(query: np.ndarray, stored: np.ndarray, config: MatchingConfig, needed: float) -> tuple[np.ndarray, np.ndarray]:
     """Rigid 4-DoF fit, trimmed: drop the worst match and refit until every match is within `inlier_distance`
-    (least squares alone lets one wrong match drag the fit off all the right ones). Returns the transform and the
-    inlier mask."""
+    (least squares alone lets one wrong match drag the fit off all the right ones). Gives up once fewer than
+    `needed` matches are left, which can no longer be verified. Returns the transform and the inlier mask."""
     inliers = np.ones(len(query), dtype=bool)
     transform = np.eye(4)
-    while inliers.sum() >= 2:
+    while inliers.sum() >= needed:
         transform = fit_yaw_translation(query[inliers], stored[inliers])
         residual = np.where(inliers, _horizontal_residuals(transform, query, stored), -np.inf)
         worst = int(np.argmax(residual))
@@ -150,22 +153,28 @@ def _fit(query: np.ndarray, stored: np.ndarray, config: MatchingConfig) -> tuple
     return transform, inliers
 
 
+def _unverified(query: Keyframe, stored: Keyframe, score: float, pairs: np.ndarray) -> KeyframeMatch:
+    """A match that failed verification, with the pairs it got as far as."""
+    return KeyframeMatch(query.id, stored.id, score, pairs, np.eye(4), float("inf"), False, 0.0)
+
+
 def match_keyframes(query: Keyframe, stored: Keyframe, config: MatchingConfig, e_max: float) -> KeyframeMatch:
     """Match two keyframes and verify the result (see the module docstring)."""
     candidates = candidate_assignments(query, stored, config)
     affinity = affinity_matrix(query, stored, candidates, e_max)
-    chosen = spectral_matching(affinity, candidates)
+    needed = _required_matches(query, stored, config)
+    chosen = spectral_matching(affinity, candidates, config)
     score = float(affinity[np.ix_(chosen, chosen)].sum() / e_max) if len(chosen) else 0.0
     kept = _supported(affinity, chosen, config.min_support)
     pairs = candidates[kept]
-    transform, residual_rms, verified, verified_score = np.eye(4), float("inf"), False, 0.0
-    if len(pairs) >= max(config.min_inliers, 2) and score > config.score_threshold:
-        transform, inliers = _fit(query.centers[pairs[:, 0]], stored.centers[pairs[:, 1]], config)
-        kept, pairs = kept[inliers], pairs[inliers]
-        if len(pairs) >= 2:
-            residual = _horizontal_residuals(transform, query.centers[pairs[:, 0]], stored.centers[pairs[:, 1]])
-            residual_rms = float(np.sqrt(np.mean(residual**2)))
-        needed = max(config.min_inliers, config.min_inlier_ratio * min(len(query.labels), len(stored.labels)))
-        verified = len(pairs) >= needed and residual_rms <= config.max_fit_residual
-        verified_score = float(affinity[np.ix_(kept, kept)].sum() / e_max) if verified else 0.0
+    if len(kept) < needed or score <= config.score_threshold:
+        return _unverified(query, stored, score, pairs)
+    transform, inliers = _fit(query.centers[pairs[:, 0]], stored.centers[pairs[:, 1]], config, needed)
+    kept, pairs = kept[inliers], pairs[inliers]
+    if len(pairs) < needed:
+        return _unverified(query, stored, score, pairs)
+    residual = _horizontal_residuals(transform, query.centers[pairs[:, 0]], stored.centers[pairs[:, 1]])
+    residual_rms = float(np.sqrt(np.mean(residual**2)))
+    verified = residual_rms <= config.max_fit_residual
+    verified_score = float(affinity[np.ix_(kept, kept)].sum() / e_max) if verified else 0.0
     return KeyframeMatch(query.id, stored.id, score, pairs, transform, residual_rms, verified, verified_score)
