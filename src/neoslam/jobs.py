@@ -11,7 +11,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from neoslam.config import NOISE_PROFILES, NeoSLAMConfig
-from neoslam.datasets.kitti import is_kitti_root, read_kitti_sequence
+from neoslam.datasets.kitti import is_kitti_root, read_kitti_sequence, sequences_in
 from neoslam.datasets.simulated import is_simulated_dataset, read_dataset, write_dataset
 from neoslam.errors import ConfigError, InputError
 from neoslam.evaluation.report import cell_metrics, loop_metrics, timing_metrics, trajectory_metrics
@@ -29,7 +29,7 @@ from neoslam.io.results import (
     write_trajectories,
 )
 from neoslam.io.trajectory_files import read_trajectory
-from neoslam.perception.frontend import open_front_end
+from neoslam.perception.frontend import ImageDataset, open_front_end
 from neoslam.pipeline import RunResult, run
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.sim.simulator import SimulatedRecording, simulate
@@ -134,7 +134,7 @@ def _load(data: Path, config: NeoSLAMConfig, inputs: ImageInputs) -> Dataset:
         return read_dataset(data)
     if is_kitti_root(data):
         if inputs.sequence is None:
-            found = ", ".join(sorted(p.name for p in (data / "sequences").iterdir() if p.is_dir())) or "none"
+            found = ", ".join(sequences_in(data)) or "none"
             raise InputError(data, f"a KITTI root needs --sequence NN (sequences here: {found})")
         sequence = read_kitti_sequence(data, inputs.sequence)
         return open_front_end(sequence, config.perception, inputs.detections, inputs.odometry)
@@ -164,9 +164,8 @@ def _metrics(dataset: Dataset, result: RunResult, config: NeoSLAMConfig, wall_s:
     metrics["objects"] = len(result.objects)
     metrics["cells"] = cell_metrics(result.cell_states, result.odometry, result.object_vector_cells)
     metrics["timing"] = timing_metrics(result.frame_times_s, wall_s)
-    front_end = getattr(dataset, "front_end", None)
-    if front_end is not None:
-        metrics["perception"] = front_end.times.summary()
+    if isinstance(dataset, ImageDataset):
+        metrics["perception"] = dataset.front_end.times.summary()
     return metrics
 
 

@@ -18,7 +18,6 @@ from neoslam.perception.odometry import (
     StereoOdometry,
     box_mask,
     detect_corners,
-    robot_odometry,
     stereo_points,
 )
 
@@ -183,12 +182,3 @@ def test_images_of_different_sizes_are_refused() -> None:
     odometry = StereoOdometry(CAMERA, CONFIG)
     with pytest.raises(ValueError, match="grey images"):
         odometry.step(np.zeros((10, 20), np.uint8), np.zeros((10, 21), np.uint8))
-
-
-def test_robot_odometry_turns_forward_camera_motion_into_forward_velocity() -> None:
-    camera_poses = np.tile(np.eye(4), (3, 1, 1))
-    camera_poses[:, 2, 3] = [0.0, 1.0, 2.0]  # camera z is forward
-    robot, linear, angular = robot_odometry(camera_poses, np.array([0.0, 0.1, 0.2]))
-    np.testing.assert_allclose(robot[:, 0, 3], [0.0, 1.0, 2.0])
-    np.testing.assert_allclose(linear[1:], [[10.0, 0.0, 0.0]] * 2, atol=1e-9)
-    np.testing.assert_allclose(angular, 0.0, atol=1e-12)

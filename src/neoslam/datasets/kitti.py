@@ -23,7 +23,7 @@ from neoslam.errors import InputError
 from neoslam.io.trajectory_files import read_kitti, read_times
 from neoslam.types import Trajectory
 
-__all__ = ["KittiSequence", "read_kitti_sequence", "read_calibration", "is_kitti_root"]
+__all__ = ["KittiSequence", "read_kitti_sequence", "read_calibration", "is_kitti_root", "sequences_in"]
 
 IMAGE_SUFFIX = ".png"
 PROJECTION_VALUES = 12
@@ -34,6 +34,11 @@ PRINCIPAL_POINT_TOLERANCE = 0.1
 
 def is_kitti_root(folder: Path) -> bool:
     return (folder / "sequences").is_dir()
+
+
+def sequences_in(root: Path) -> list[str]:
+    """The sequence folders under a KITTI odometry root, sorted."""
+    return sorted(p.name for p in (root / "sequences").glob("*") if p.is_dir())
 
 
 def read_calibration(path: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -143,8 +148,7 @@ def read_kitti_sequence(root: Path, sequence: str) -> KittiSequence:
     """Check the layout of sequence NN under a KITTI odometry root and read its calibration, times and poses."""
     folder = root / "sequences" / sequence
     if not folder.is_dir():
-        found = sorted(p.name for p in (root / "sequences").glob("*") if p.is_dir())
-        raise InputError(folder, f"sequence not found (sequences here: {', '.join(found) or 'none'})")
+        raise InputError(folder, f"sequence not found (sequences here: {', '.join(sequences_in(root)) or 'none'})")
     left_projection, right_projection = read_calibration(folder / "calib.txt")
     times_path = folder / "times.txt"
     if not times_path.is_file():

@@ -24,9 +24,9 @@ import cv2
 import numpy as np
 
 from neoslam.config import CameraConfig
-from neoslam.geometry import body_velocities, invert_pose, make_pose
-from neoslam.io.frames import camera_poses_to_robot
+from neoslam.geometry import invert_pose, make_pose
 from neoslam.perception.config import StereoOdometryConfig
+from neoslam.perception.stereo import triangulate
 
 __all__ = [
     "StereoFeatures",
@@ -37,7 +37,6 @@ __all__ = [
     "track_points",
     "predict_pixels",
     "estimate_motion",
-    "robot_odometry",
 ]
 
 # OpenCV's own Lucas-Kanade termination (30 iterations or a 0.01 px update): tighter buys no accuracy here.
@@ -130,10 +129,7 @@ def stereo_points(
     ok &= disparity >= config.min_disparity
     depth = camera.fx * camera.baseline / np.where(ok, disparity, 1.0)
     ok &= depth <= config.max_depth
-    pixels, depth = pixels[ok], depth[ok]
-    x = (pixels[:, 0] - camera.cx) * depth / camera.fx
-    y = (pixels[:, 1] - camera.cy) * depth / camera.fy
-    return pixels, np.stack([x, y, depth], axis=1)
+    return pixels[ok], triangulate(pixels[ok], disparity[ok], camera)
 
 
 def track_points(
@@ -256,10 +252,3 @@ class StereoOdometry:
         self._motion = motion
         self._pose = self._pose @ motion
         return self.motion
-
-
-def robot_odometry(camera_poses: np.ndarray, timestamps: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Accumulated camera poses (n, 4, 4) -> robot poses T_w_r and (n, 3) body linear and angular velocities."""
-    robot = camera_poses_to_robot(camera_poses)
-    linear, angular = body_velocities(robot, timestamps)
-    return robot, linear, angular
