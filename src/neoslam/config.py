@@ -268,6 +268,27 @@ class MatchingConfig(_Section):
         "(about 3 σ of a right match seen from the other direction, where a truck's or a cross-street object's "
         "centre is off by a metre)",
     )
+    max_contradictions: int = Field(
+        2,
+        ge=0,
+        description="reject if under the fit more objects than this stand well inside the other keyframe's ground "
+        "with no object of their label near them there: a place driven again shows the same objects, a street that "
+        "only shares part of its layout shows others (true matches on the simulated KITTI drives: none in 81 %, "
+        "at most 2 in 97 %; the false ones that reached acceptance: 3 to 7)",
+    )
+    contradiction_radius: float = Field(
+        2.5,
+        gt=0,
+        description="an object with one of its label this close under the fit is not contradicted, m "
+        "(keyframes.association_radius: observations this close are one object; a right match seen from the other "
+        "side or a truck's centre can be off by more than the inlier distance)",
+    )
+    contradiction_margin: float = Field(
+        3.0,
+        ge=0,
+        description="only objects this far inside the other keyframe's ground count, m: near its edge an object may "
+        "fall in one keyframe and not in the other by the noise of its centre",
+    )
     max_place_offset: float = Field(
         3.5,
         gt=0,
@@ -280,6 +301,17 @@ class MatchingConfig(_Section):
         gt=0,
         description="reject if the fit puts the two robot poses this far apart in height, m: a bridge "
         "over a street is another place (KITTI 02 and 08 ground truth disagree by up to 5.8 m at one place)",
+    )
+    max_yaw_drift_deg: float = Field(
+        30.0,
+        gt=0,
+        description="reject a fit that turns the query's world by more than this, degrees, plus yaw_drift_per_100m: "
+        "its rotation is the odometry's heading drift between the two passes; a layout that is nearly point-"
+        "symmetric can also fit turned by 180° (true fits on the simulated KITTI drives: at most 1.5°/100 m with "
+        "vo odometry, 7.4°/100 m with heavy, never above this bound)",
+    )
+    yaw_drift_per_100m: float = Field(
+        3.0, ge=0, description="degrees per 100 m travelled since the stored keyframe, added to max_yaw_drift_deg"
     )
     exclude_recent_distance: float = Field(60.0, ge=0, description="never match keyframes from the last metres")
     search_radius: float = Field(15.0, gt=0, description="candidates lie this close to the estimated position, m")

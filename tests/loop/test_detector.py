@@ -211,6 +211,24 @@ def test_a_fit_that_puts_the_robot_elsewhere_is_rejected(make_street, make_keyfr
         assert sum(len(c) for c in closures) == expected
 
 
+@pytest.mark.parametrize(("turn_deg", "bound_deg", "accepted"), [(20.0, None, 7), (60.0, None, 0), (60.0, 90.0, 7)])
+def test_a_fit_turned_more_than_the_odometry_can_drift_is_rejected(
+    passes: TwoPasses, turn_deg: float, bound_deg: float | None, accepted: int
+) -> None:
+    # The second pass's world is turned about the street by `turn_deg`: the fit finds the turn. 20° is a heading
+    # drift the odometry can build up over the 300-400 m since the first pass; 60° is not (the default bound there
+    # is 30° + 3°/100 m, about 40°): a layout that fits turned so far is another place, or the same one flipped.
+    config = MATCHING if bound_deg is None else MATCHING.model_copy(update={"max_yaw_drift_deg": bound_deg})
+    detector = LoopClosureDetector(KEYFRAMES, config)
+    passes.first_pass(detector)
+    xs = np.arange(30.0, 61.0, 5.0)
+    drifts = [_turned_about(np.array([45.0, 0.0, 0.0]), np.radians(turn_deg))] * len(xs)
+    closures, _ = _second_pass(passes, detector, xs, drifts=drifts)
+    assert sum(len(c) for c in closures) == accepted
+    if accepted:
+        assert all(c.match_keyframe == _stored_at(x) for c, x in zip(sum(closures, []), xs, strict=True))
+
+
 def test_a_third_visit_is_accepted_like_the_second(passes: TwoPasses) -> None:
     detector = LoopClosureDetector(KEYFRAMES, MATCHING)
     passes.first_pass(detector)

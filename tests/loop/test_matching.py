@@ -10,6 +10,7 @@ from neoslam.geometry import fit_yaw_translation, invert_pose, transform_points,
 from neoslam.loop.matching import (
     affinity_matrix,
     candidate_assignments,
+    contradictions,
     match_keyframes,
     principal_eigenvector,
     spectral_matching,
@@ -17,6 +18,9 @@ from neoslam.loop.matching import (
 
 CONFIG = MatchingConfig()
 E_MAX = KeyframeConfig().e_max
+# For the tests of matching itself, whose queries drop objects and add strangers in the middle of the keyframe:
+# the contradiction check (tested on its own below) rightly counts those against a place.
+TOLERANT = CONFIG.model_copy(update={"max_contradictions": 1_000})
 
 
 def _grey(*levels: float) -> np.ndarray:
@@ -123,20 +127,20 @@ def test_the_default_power_iteration_chooses_what_the_exact_eigenvector_chooses(
     street = make_street(rng, count=14, length=60.0)
     stored = make_keyframe(street.centers, street.labels, street.patches(rng, range(14)))
     centres, labels, patches, _ = _query_of(street, rng, rng.choice(14, 11, replace=False), make_yaw_pose(1.0))
-    exact = CONFIG.model_copy(update={"power_iterations": 10_000, "power_tolerance": 1e-12})
+    exact = TOLERANT.model_copy(update={"power_iterations": 10_000, "power_tolerance": 1e-12})
     copy = make_keyframe(centres, labels, patches)
-    candidates = candidate_assignments(copy, stored, CONFIG)
+    candidates = candidate_assignments(copy, stored, TOLERANT)
     affinity = affinity_matrix(copy, stored, candidates, E_MAX)
     np.testing.assert_array_equal(
-        spectral_matching(affinity, candidates, CONFIG), spectral_matching(affinity, candidates, exact)
+        spectral_matching(affinity, candidates, TOLERANT), spectral_matching(affinity, candidates, exact)
     )
-    assert match_keyframes(copy, stored, CONFIG, E_MAX).verified
+    assert match_keyframes(copy, stored, TOLERANT, E_MAX).verified
     # Another street with the same classes and looks: no group of assignments dominates, the iteration is cut
     # short and the order of its entries may differ, but not the verdict.
     other = make_keyframe(
         make_street(rng, count=14, length=60.0).centers, street.labels, street.patches(rng, range(14))
     )
-    cut_short = match_keyframes(other, stored, CONFIG, E_MAX)
+    cut_short = match_keyframes(other, stored, TOLERANT, E_MAX)
     assert cut_short.verified == match_keyframes(other, stored, exact, E_MAX).verified
 
 
@@ -184,7 +188,7 @@ def test_a_permuted_moved_noisy_copy_is_matched(make_keyframe, make_street, make
     query = make_keyframe(centres, labels, patches, id=9)
 
     assert len(candidate_assignments(query, stored, CONFIG)) > len(labels)  # appearance alone is ambiguous
-    match = match_keyframes(query, stored, CONFIG, E_MAX)
+    match = match_keyframes(query, stored, TOLERANT, E_MAX)
     assert match.verified and (match.query, match.match) == (9, 3)
     assert sorted(map(tuple, match.pairs.tolist())) == sorted((q, s) for q, s in enumerate(truth) if s >= 0)
     # The transform takes the query's world to the stored one: the inverse of the motion.
@@ -271,7 +275,7 @@ def test_min_inliers_is_enforced(make_keyframe, make_street, count: int, verifie
 def test_min_inlier_ratio_is_enforced(make_keyframe, make_street, shared: int, ratio: float, verified: bool) -> None:
     # Ten objects each: 0.7 x 10 = 7 must match, whatever min_inliers (4) says.
     query, stored = _copy(make_keyframe, make_street, np.random.default_rng(shared), 10, shared)
-    match = match_keyframes(query, stored, CONFIG.model_copy(update={"min_inlier_ratio": ratio}), E_MAX)
+    match = match_keyframes(query, stored, TOLERANT.model_copy(update={"min_inlier_ratio": ratio}), E_MAX)
     assert match.n_matches == shared
     assert match.verified is verified
 
@@ -306,7 +310,7 @@ def test_a_match_short_of_the_needed_count_is_given_up_before_the_fit(make_keyfr
     match = match_keyframes(short, stored, CONFIG, E_MAX)
     assert not match.verified and match.n_matches == 6 and fits == []
     enough, stored = _copy(make_keyframe, make_street, np.random.default_rng(7), 10, 7)
-    assert match_keyframes(enough, stored, CONFIG, E_MAX).verified and fits == [7]
+    assert match_keyframes(enough, stored, TOLERANT, E_MAX).verified and fits == [7]
 
 
 @pytest.mark.parametrize("k", [4, 6, 9])
@@ -325,3 +329,87 @@ def test_nothing_to_match_gives_an_empty_unverified_match(make_keyframe) -> None
     match = match_keyframes(query, stored, CONFIG, E_MAX)
     assert not match.verified and match.score == 0.0 and match.n_matches == 0
     assert len(spectral_matching(np.zeros((0, 0)), np.empty((0, 2), dtype=int))) == 0
+
+
+# ------------------------------------------------------------------------------------------------ contradictions
+
+
+# Twelve cars parked irregularly on both kerbs of a street along x; the robot stands at x = 27.5 beside the car
+# there, the current object, and the two end cars are both 27.5 m from it: the keyframe's ground is that disc.
+STREET = np.column_stack(
+    [
+        [0.0, 4.0, 11.0, 15.0, 20.0, 24.0, 27.5, 33.0, 37.0, 42.0, 48.0, 55.0],
+        [5.0, -5.0, 5.0, -5.5, 5.5, -5.0, 5.0, -5.0, 5.5, -5.0, 5.0, 5.0],
+        np.zeros(12),
+    ]
+)
+ROBOT = np.array([[1.0, 0, 0, 27.5], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
+MIDDLE = 7  # the car at x = 33, well inside
+
+
+def _street_keyframe(make_keyframe, centres, labels=None):
+    return make_keyframe(centres, labels or ["car"] * len(centres), pose=ROBOT)
+
+
+def test_a_copy_is_not_contradicted(make_keyframe) -> None:
+    stored = _street_keyframe(make_keyframe, STREET)
+    assert contradictions(_street_keyframe(make_keyframe, STREET), stored, np.eye(4), CONFIG) == 0
+
+
+@pytest.mark.parametrize(
+    ("change", "expected"),
+    [
+        ("drop one in the middle", 1),  # the stored car finds nothing where the query saw its street
+        ("drop one at the edge", 0),  # within the margin of the query's ground: it may just lie beyond it
+        ("add a stranger in the middle", 1),
+        ("move one 2 m", 0),  # within contradiction_radius: the same car, its centre off
+        ("move one 4 m", 2),  # the moved car finds nothing, nor does the stored one
+        ("relabel one", 2),  # a truck where the car stood: neither is explained
+    ],
+)
+def test_contradictions_count_what_either_keyframe_misses_inside_the_other(make_keyframe, change, expected) -> None:
+    stored = _street_keyframe(make_keyframe, STREET)
+    centres, labels = STREET.copy(), ["car"] * len(STREET)
+    middle = MIDDLE
+    if change == "drop one in the middle":
+        centres, labels = np.delete(centres, middle, axis=0), labels[:-1]
+    elif change == "drop one at the edge":  # the car at x = 0; the one at x = 55 keeps the query's ground
+        centres, labels = centres[1:], labels[1:]
+    elif change == "add a stranger in the middle":
+        centres, labels = np.vstack([centres, [22.5, -8.0, 0.0]]), [*labels, "bicycle"]
+    elif change.startswith("move one"):
+        centres[middle, 1] += float(change.split()[2])
+    elif change == "relabel one":
+        labels[middle] = "truck"
+    query = _street_keyframe(make_keyframe, centres, labels)
+    assert contradictions(query, stored, np.eye(4), CONFIG) == expected
+
+
+def test_contradictions_are_counted_under_the_fit(make_keyframe, make_yaw_pose) -> None:
+    # The query's world is turned and moved: only under the fit do its objects stand on the stored ones.
+    motion = make_yaw_pose(np.radians(70.0), (300.0, -40.0, 0.0))
+    stored = _street_keyframe(make_keyframe, STREET)
+    query = make_keyframe(
+        transform_points(motion, np.delete(STREET, MIDDLE, axis=0)), ["car"] * 11, pose=motion @ ROBOT
+    )
+    assert contradictions(query, stored, invert_pose(motion), CONFIG) == 1
+    across = make_yaw_pose(0.0, (0.0, 3.0, 0.0)) @ invert_pose(motion)  # a fit 3 m off across the street
+    assert contradictions(query, stored, across, CONFIG) > 10
+
+
+def test_a_street_that_shares_only_part_of_the_layout_is_not_a_place(make_keyframe, make_yaw_pose) -> None:
+    # Nine of twelve parked cars stand where the stored ones do (a street elsewhere, parked alike); in the middle,
+    # where the stored street has three more cars, the query's has three people. The nine fit exactly and make 75 %
+    # of the smaller keyframe, which all the other checks accept.
+    motion = make_yaw_pose(np.radians(20.0), (500.0, 200.0, 0.0))
+    stored = _street_keyframe(make_keyframe, STREET)
+    shared = [0, 1, 2, 3, 4, 8, 9, 10, 11]
+    people = np.array([[21.0, -8.0, 0.0], [26.0, 8.5, 0.0], [31.0, -8.0, 0.0]])
+    centres = transform_points(motion, np.vstack([STREET[shared], people]))
+    query = make_keyframe(centres, ["car"] * 9 + ["person"] * 3, pose=motion @ ROBOT)
+
+    lenient = match_keyframes(query, stored, TOLERANT, E_MAX)
+    assert lenient.verified and lenient.n_matches == 9
+    assert contradictions(query, stored, lenient.transform, CONFIG) == 6
+    assert not match_keyframes(query, stored, CONFIG, E_MAX).verified
+    assert match_keyframes(query, stored, CONFIG.model_copy(update={"max_contradictions": 6}), E_MAX).verified

@@ -84,9 +84,17 @@ class LoopClosureDetector:
                     continue
             closure, offset = self._closure(keyframe, match)
             same_place = np.linalg.norm(offset[:2]) <= self.config.max_place_offset
-            if same_place and abs(offset[2]) <= self.config.max_vertical_offset:
+            level = abs(offset[2]) <= self.config.max_vertical_offset
+            if same_place and level and self._plausible_turn(match, odometer_m):
                 return _Relocalisation(keyframe.id, keyframe.pose[:3, 3].copy(), match.transform, closure)
         return None
+
+    def _plausible_turn(self, match: KeyframeMatch, odometer_m: float) -> bool:
+        """Whether the fit's rotation is a heading drift the odometry can have built up since the stored keyframe
+        (a nearly point-symmetric layout also fits turned by about 180°)."""
+        travelled = odometer_m - self.index.odometer(match.match)
+        bound = self.config.max_yaw_drift_deg + self.config.yaw_drift_per_100m * travelled / 100.0
+        return bool(np.degrees(rotation_angle(match.transform[:3, :3])) <= bound)
 
     def _consistent(self, a: _Relocalisation, b: _Relocalisation) -> bool:
         """Whether two relocalisations put the robot at the same place: compared where the two keyframes were made,

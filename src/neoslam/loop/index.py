@@ -59,6 +59,10 @@ class KeyframeIndex:
         self._signatures[n] = signature(keyframe)
         self.keyframes.append(keyframe)
 
+    def odometer(self, index: int) -> float:
+        """The odometer reading (m) when stored keyframe `index` was made."""
+        return float(self._odometer[index])
+
     def eligible(self, position: np.ndarray, odometer_m: float) -> np.ndarray:
         """Indices of stored keyframes that are old enough and within the drift-bounded search radius."""
         n = len(self.keyframes)

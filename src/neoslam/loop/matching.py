@@ -11,6 +11,9 @@ rigid 4-DoF fit (yaw, translation) of the matched centres must explain at least 
 `min_inlier_ratio` of the smaller keyframe) within `inlier_distance` in the ground plane with a small RMS residual.
 The fit is also the metric constraint between the two keyframes. Most pairs of keyframes share no place: a match
 that can no longer reach the number of matches it needs is given up as soon as that shows, before or during the fit.
+Last, the fit must not be contradicted: objects of either keyframe that the fit puts well inside the other's ground
+should find an object of their label there. A street whose layout shares a regular stretch with another (cars
+parked every few metres) fits on that stretch, but the bicycles, trucks and gaps around it do not follow.
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ __all__ = [
     "affinity_matrix",
     "principal_eigenvector",
     "spectral_matching",
+    "contradictions",
     "match_keyframes",
 ]
 
@@ -153,6 +157,40 @@ def _fit(query: np.ndarray, stored: np.ndarray, config: MatchingConfig, needed: 
     return transform, inliers
 
 
+def _ground(keyframe: Keyframe) -> tuple[np.ndarray, float]:
+    """Centre and radius (ground plane) of what a keyframe covers: its current object, the one nearest the robot
+    (paper 3.2), and the farthest of its objects from it."""
+    centres = keyframe.centers[:, :2]
+    current = centres[np.argmin(np.linalg.norm(centres - keyframe.pose[:2, 3], axis=1))]
+    return current, float(np.linalg.norm(centres - current, axis=1).max())
+
+
+def _uncontradicted(points: np.ndarray, labels, others: np.ndarray, other_labels, radius: float) -> np.ndarray:
+    """Bool per point: an object of the same label stands within `radius` among the others (ground plane)."""
+    same = np.asarray(labels)[:, None] == np.asarray(other_labels)[None, :]
+    distance = np.linalg.norm(points[:, None, :2] - others[None, :, :2], axis=2)
+    return (same & (distance <= radius)).any(axis=1)
+
+
+def contradictions(query: Keyframe, stored: Keyframe, transform: np.ndarray, config: MatchingConfig) -> int:
+    """Objects of either keyframe that the fit (query world -> stored world) puts at least `contradiction_margin`
+    inside the other keyframe's ground with no object of their label within `contradiction_radius` there."""
+    moved = transform_points(transform, query.centers)
+    query_centre, query_radius = _ground(query)
+    query_centre = transform_points(transform, np.append(query_centre, 0.0)[None])[0, :2]
+    stored_centre, stored_radius = _ground(stored)
+    count = 0
+    for points, labels, others, other_labels, centre, radius in (
+        (moved, query.labels, stored.centers, stored.labels, stored_centre, stored_radius),
+        (stored.centers, stored.labels, moved, query.labels, query_centre, query_radius),
+    ):
+        inside = np.linalg.norm(points[:, :2] - centre, axis=1) <= radius - config.contradiction_margin
+        labels_inside = np.asarray(labels)[inside]
+        found = _uncontradicted(points[inside], labels_inside, others, other_labels, config.contradiction_radius)
+        count += int((~found).sum())
+    return count
+
+
 def _unverified(query: Keyframe, stored: Keyframe, score: float, pairs: np.ndarray) -> KeyframeMatch:
     """A match that failed verification, with the pairs it got as far as."""
     return KeyframeMatch(query.id, stored.id, score, pairs, np.eye(4), float("inf"), False, 0.0)
@@ -175,6 +213,8 @@ def match_keyframes(query: Keyframe, stored: Keyframe, config: MatchingConfig, e
         return _unverified(query, stored, score, pairs)
     residual = _horizontal_residuals(transform, query.centers[pairs[:, 0]], stored.centers[pairs[:, 1]])
     residual_rms = float(np.sqrt(np.mean(residual**2)))
-    verified = residual_rms <= config.max_fit_residual
+    verified = residual_rms <= config.max_fit_residual and (
+        contradictions(query, stored, transform, config) <= config.max_contradictions
+    )
     verified_score = float(affinity[np.ix_(kept, kept)].sum() / e_max) if verified else 0.0
     return KeyframeMatch(query.id, stored.id, score, pairs, transform, residual_rms, verified, verified_score)
