@@ -1,16 +1,21 @@
 """Loop closure by object keyframes: precision and recall on simulated KITTI drives, and query time against map size.
 
-(a) Accuracy: `neoslam simulate` (profile vo) on KITTI 00, 02, 05, 06 and 08 for several seeds, then the pipeline;
+(a) Accuracy: `neoslam simulate` (profile vo, or --profile) on KITTI 00, 02, 05, 06 and 08 for several seeds, then
+    the pipeline (default config, or --config);
     closures judged against ground truth (true when within 5 m horizontally and 100 frames apart; 3-D precision
     too), recall over the keyframes that truly revisit a place. Also the default town scenario, whose repeated
-    layout must give no false closure. Each drive is run twice: with our keyframe neighbourhood (30 m) and with
+    layout must give no false closure. Each drive is run three times: with our keyframe neighbourhood (30 m), with
     the paper's (e_max = 1.5 m around the current object, and no minimum number of objects: with ours, 4, such a
-    small neighbourhood never makes a keyframe, since street objects stand metres apart).
+    small neighbourhood never makes a keyframe, since street objects stand metres apart), and with ours but without
+    the last two checks of the verification (contradicted objects, heading drift), whose closures show what those
+    checks see: contradicted objects and the heading drift of the fit, of true and of false closures. Revisit
+    keyframes left without a true closure are sorted by why (`_loop_misses.py`).
 (b) Speed: median query time (retrieval + matching + verification) with 100 ... 5,000 keyframes stored, built by
     tiling the keyframes of a simulated KITTI 00 drive over a larger area; revisits and new places apart, and at
     the largest map also with the exact eigenvector (power iteration run to 1e-9, at most 100 products).
 
-    python benchmarks/loops.py [--quick] [--seeds N ...] [--json FILE]
+    python benchmarks/loops.py [--quick] [--seeds N ...] [--sequences 08 town ...] [--profile vo|heavy]
+                               [--config FILE.yaml] [--json FILE]
 
 Seeds 1-10 were looked at while the verification was designed (the contradiction and heading-drift checks);
 seeds 11 and up were not: `--seeds 11 12 13 14 15 16` measures on drives held out from that design.
@@ -28,11 +33,15 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
+from _loop_misses import CLASSES as MISS_CLASSES  # noqa: E402
+from _loop_misses import classify_misses  # noqa: E402
 from neoslam.config import MatchingConfig, NeoSLAMConfig, load_config  # noqa: E402
 from neoslam.datasets.simulated import read_dataset  # noqa: E402
-from neoslam.evaluation.loops import LoopCriteria, evaluate_closures  # noqa: E402
+from neoslam.evaluation.loops import LoopCriteria, evaluate_closures, judge_closures  # noqa: E402
+from neoslam.geometry import invert_pose, rotation_angle  # noqa: E402
 from neoslam.jobs import record, simulate_dataset, simulation_config  # noqa: E402
 from neoslam.loop.detector import LoopClosureDetector  # noqa: E402
+from neoslam.loop.matching import contradictions  # noqa: E402
 from neoslam.pipeline import NeoSLAM  # noqa: E402
 from neoslam.types import Keyframe  # noqa: E402
 
@@ -43,15 +52,19 @@ QUICK_MAP_SIZES = [100, 1000, 5000]
 QUERIES = 200
 TILE_OFFSET_M = 1500.0  # copies of the KITTI 00 keyframes are laid this far apart
 PAPER_KEYFRAMES = {"neighbourhood_radius": 1.5, "min_objects": 1}  # paper 3.2: "all objects within e_max = 1.5 m"
+WITHOUT_LAST_CHECKS = {"max_contradictions": 10**6, "max_yaw_drift_deg": 360.0}
 EXACT_EIGENVECTOR = {"power_iterations": 100, "power_tolerance": 1e-9}  # the power iteration run to convergence
 
 
-def _drive(config: NeoSLAMConfig, data: Path) -> tuple[NeoSLAM, np.ndarray, list[float]]:
-    """Run the pipeline on a dataset; returns it, the truth positions and the wall time of each loop query."""
+def _drive(config: NeoSLAMConfig, data: Path) -> tuple[NeoSLAM, np.ndarray, list[float], set[int]]:
+    """Run the pipeline on a dataset; returns it, the true poses, the wall time of each loop query and the ids of
+    the keyframes the detector relocalised."""
     dataset = read_dataset(data)
     slam = NeoSLAM(config)
-    detector_query = slam.loop_detector.query
+    detector = slam.loop_detector
+    detector_query, detector_relocalise = detector.query, detector.relocalise
     query_times: list[float] = []
+    relocalised: set[int] = set()
 
     def timed_query(keyframe, odometer):
         start = time.perf_counter()
@@ -59,10 +72,16 @@ def _drive(config: NeoSLAMConfig, data: Path) -> tuple[NeoSLAM, np.ndarray, list
         query_times.append(time.perf_counter() - start)
         return accepted
 
-    slam.loop_detector.query = timed_query  # measure without touching the pipeline
+    def recorded_relocalise(keyframe, odometer):
+        found = detector_relocalise(keyframe, odometer)
+        if found is not None:
+            relocalised.add(keyframe.id)
+        return found
+
+    detector.query, detector.relocalise = timed_query, recorded_relocalise  # observed, the pipeline untouched
     for frame in dataset.frames():
         slam.step(frame)
-    return slam, dataset.ground_truth.positions, query_times
+    return slam, dataset.ground_truth.poses, query_times, relocalised
 
 
 def _judge(slam: NeoSLAM, truth: np.ndarray, horizontal: bool) -> dict:
@@ -72,17 +91,46 @@ def _judge(slam: NeoSLAM, truth: np.ndarray, horizontal: bool) -> dict:
     return evaluate_closures(slam.detected_closures, positions, LoopCriteria(), frames).as_dict()
 
 
-def accuracy(name: str, trajectory: Path | None, seed: int, workdir: Path) -> tuple[dict, dict]:
-    """The drive with our keyframe setting and with the paper's, on the same simulated data."""
-    config = simulation_config(load_config(environ={}), "vo", seed)
+def accuracy(
+    base: NeoSLAMConfig, name: str, trajectory: Path | None, profile: str, seed: int, workdir: Path
+) -> tuple[dict, dict, dict]:
+    """The drive with our keyframe setting, with the paper's, and with ours without the last two checks."""
+    config = simulation_config(base, profile, seed)
     recording = record(config, trajectory=trajectory, fmt="kitti") if trajectory else record(config, route=name)
     simulate_dataset(workdir / "data", recording, overwrite=True)
     paper = config.model_copy(update={"keyframes": config.keyframes.model_copy(update=PAPER_KEYFRAMES)})
-    return _accuracy_of(name, seed, config, workdir / "data"), _accuracy_of(name, seed, paper, workdir / "data")
+    unchecked = config.model_copy(update={"matching": config.matching.model_copy(update=WITHOUT_LAST_CHECKS)})
+    return (
+        _accuracy_of(name, seed, config, workdir / "data"),
+        _accuracy_of(name, seed, paper, workdir / "data"),
+        _accuracy_of(name, seed, unchecked, workdir / "data"),
+    )
+
+
+def _closure_evidence(slam: NeoSLAM, truth: np.ndarray) -> list[dict]:
+    """Per detected closure: true or not, its contradicted objects and its fit's heading drift (deg per 100 m)."""
+    index, matching = slam.loop_detector.index, slam.config.matching
+    correct = judge_closures(slam.detected_closures, truth[:, :2], LoopCriteria())
+    evidence = []
+    for closure, right in zip(slam.detected_closures, correct, strict=True):
+        query, stored = index.keyframes[closure.query_keyframe], index.keyframes[closure.match_keyframe]
+        transform = stored.pose @ closure.relative_pose @ invert_pose(query.pose)  # query world -> stored world
+        travelled = index.odometer(query.id) - index.odometer(stored.id)
+        turn = float(np.degrees(rotation_angle(transform[:3, :3])))
+        evidence.append(
+            {
+                "true": bool(right),
+                "contradictions": contradictions(query, stored, transform, matching),
+                "yaw_deg_per_100m": 100.0 * turn / max(travelled, 1.0),
+                "yaw_deg": turn,
+            }
+        )
+    return evidence
 
 
 def _accuracy_of(name: str, seed: int, config: NeoSLAMConfig, data: Path) -> dict:
-    slam, truth, query_times = _drive(config, data)
+    slam, poses, query_times, relocalised = _drive(config, data)
+    truth = poses[:, :3, 3]
     flat, full = _judge(slam, truth, horizontal=True), _judge(slam, truth, horizontal=False)
     keyframes = slam.loop_detector.index.keyframes
     return {
@@ -100,6 +148,8 @@ def _accuracy_of(name: str, seed: int, config: NeoSLAMConfig, data: Path) -> dic
         "recall_at_full_precision": flat["recall_at_full_precision"],
         "precision_3d": full["precision"],
         "query_ms_median": 1e3 * statistics.median(query_times) if query_times else 0.0,
+        "_evidence": _closure_evidence(slam, truth),
+        "_misses": classify_misses(slam, poses, relocalised),
         "_keyframes": list(slam.loop_detector.index.keyframes),
         "_odometer": slam.keyframes.odometer_m,
     }
@@ -165,9 +215,9 @@ def query_speed(keyframes: list[Keyframe], sizes: list[int], queries: int) -> li
     return [*rows, {"eigenvector": "exact", **_speed_row(exact, stream, max(sizes), queries)}]
 
 
-def _drives(sequences: list[str]) -> list[tuple[str, Path | None]]:
-    """(name, KITTI pose file) of each sequence, then the town route (built in, no file)."""
-    return [(s, data_root() / "kitti" / "poses" / f"{s}.txt") for s in sequences] + [("town", None)]
+def _drives(names: list[str]) -> list[tuple[str, Path | None]]:
+    """(name, KITTI pose file) of each drive; the town route is built in (no file)."""
+    return [(n, None if n == "town" else data_root() / "kitti" / "poses" / f"{n}.txt") for n in names]
 
 
 def _paper_note(paper: list[dict], config: NeoSLAMConfig) -> str:
@@ -202,21 +252,56 @@ def summary(runs: list[dict]) -> list[dict]:
     return rows
 
 
-def _seed_option(parser) -> None:
-    parser.add_argument("--seeds", type=int, nargs="+", help=f"simulation seeds (default {SEEDS}; e.g. 4 5 6 held out)")
+def _share(rows: list[dict], test) -> float:
+    return sum(map(test, rows)) / len(rows) if rows else float("nan")
+
+
+def checks_seen(unchecked: list[dict], limit: int) -> dict:
+    """What the contradiction and heading-drift checks see in the closures accepted without them."""
+    evidence = [e for r in unchecked for e in r["_evidence"]]
+    true = [e for e in evidence if e["true"]]
+    false = [e for e in evidence if not e["true"]]
+    return {
+        "false_closures": len(false),
+        "false_closure_drives": sum(r["false_positive"] > 0 for r in unchecked),
+        "true_closures": len(true),
+        "true_without_contradiction": _share(true, lambda e: e["contradictions"] == 0),
+        "true_within_limit": _share(true, lambda e: e["contradictions"] <= limit),
+        "false_contradictions": sorted({e["contradictions"] for e in false}),
+        "true_max_yaw_deg_per_100m": max((e["yaw_deg_per_100m"] for e in true), default=float("nan")),
+        "false_yaw_deg": sorted({round(e["yaw_deg"]) for e in false}),
+    }
+
+
+def _options(parser) -> None:
+    parser.add_argument("--seeds", type=int, nargs="+", help=f"simulation seeds (default {SEEDS}; 11 and up held out)")
+    parser.add_argument("--profile", default="vo", help="odometry noise profile of the simulated drives (default vo)")
+    parser.add_argument("--sequences", nargs="+", help=f"drives (default {' '.join(SEQUENCES)} town)")
+    parser.add_argument("--config", type=Path, help="a NeoSLAM config file (YAML) instead of the defaults")
+
+
+def misses_table(runs: list[dict]) -> list[dict]:
+    """Missed revisit keyframes by class, per sequence over its seeds."""
+    rows = []
+    for sequence in dict.fromkeys(r["sequence"] for r in runs):
+        mine = [r for r in runs if r["sequence"] == sequence]
+        rows.append({"sequence": sequence, **{c: sum(r["_misses"][c] for r in mine) for c in MISS_CLASSES}})
+    return rows
 
 
 def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], _seed_option)
-    sequences = ["05", "08"] if args.quick else SEQUENCES
+    args = parse_args(__doc__.splitlines()[0], _options)
+    sequences = args.sequences or (["05", "08", "town"] if args.quick else [*SEQUENCES, "town"])
+    base = load_config(args.config, environ={})
     seeds = args.seeds or (SEEDS[:1] if args.quick else SEEDS)
-    runs, paper = [], []
+    runs, paper, unchecked = [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         for sequence, trajectory in _drives(sequences):
             for seed in seeds:
-                ours, papers = accuracy(sequence, trajectory, seed, Path(tmp))
+                ours, papers, without = accuracy(base, sequence, trajectory, args.profile, seed, Path(tmp))
                 runs.append(ours)
                 paper.append(papers)
+                unchecked.append(without)
         keyframes_00 = next((r["_keyframes"] for r in runs if r["sequence"] == "00"), runs[0]["_keyframes"])
     sizes = QUICK_MAP_SIZES if args.quick else MAP_SIZES
     speed = query_speed(keyframes_00, sizes, QUERIES // 4 if args.quick else QUERIES)
@@ -224,7 +309,8 @@ def main() -> None:
                "recall", "f1", "recall_at_full_precision", "precision_3d", "query_ms_median"]  # fmt: skip
     public = [{k: v for k, v in r.items() if not k.startswith("_")} for r in runs]
     paper_public = [{k: v for k, v in r.items() if not k.startswith("_")} for r in paper]
-    print("## (a) Loop closures on simulated drives (profile vo), judged within 5 m horizontally, 100 frames apart\n")
+    print(f"## (a) Loop closures on simulated drives (profile {args.profile}), judged within 5 m horizontally, "
+          "100 frames apart\n")  # fmt: skip
     print(f"Our keyframes: objects within {runs[0]['neighbourhood_m']:.1f} m of the current object.\n")
     print(markdown_table(public, columns))
     print(f"\nPer sequence over seeds {', '.join(map(str, seeds))}:\n")
@@ -233,7 +319,22 @@ def main() -> None:
     print(markdown_table(summary(public), summary_columns))
     print(f"\nThe paper's keyframes: objects within {paper[0]['neighbourhood_m']:.1f} m (e_max), no minimum count.\n")
     print(markdown_table(paper_public, [*columns[:3], "max_objects", *columns[3:]]))
-    print("\n" + _paper_note(paper, load_config(environ={})))
+    print("\n" + _paper_note(paper, base))
+    unchecked_public = [{k: v for k, v in r.items() if not k.startswith("_")} for r in unchecked]
+    limit = base.matching.max_contradictions
+    seen = checks_seen(unchecked, limit)
+    print("\nWithout the contradiction and heading-drift checks:\n")
+    print(markdown_table(summary(unchecked_public), summary_columns))
+    print(
+        f"\nThere, {seen['false_closures']} false closures on {seen['false_closure_drives']} drives, with "
+        f"{seen['false_contradictions']} contradicted objects and turned by {seen['false_yaw_deg']}°; of "
+        f"{seen['true_closures']} true closures, {seen['true_without_contradiction']:.1%} have no contradicted object "
+        f"and {seen['true_within_limit']:.1%} at most {limit}; the true fits turn at most "
+        f"{seen['true_max_yaw_deg_per_100m']:.2f}° per 100 m travelled."
+    )
+    misses = misses_table(runs)
+    print("\nMissed revisit keyframes, by why (see benchmarks/_loop_misses.py):\n")
+    print(markdown_table(misses, ["sequence", *MISS_CLASSES]))
     print("\n## (b) Query time (retrieval + matching + verification) against map size\n")
     speed_columns = ["eigenvector", "map_size", "queries", "eligible_median", "revisit_ms_median",
                      "new_place_ms_median", "query_ms_median", "query_ms_p95"]  # fmt: skip
@@ -254,6 +355,9 @@ def main() -> None:
             "accuracy": public,
             "accuracy_summary": summary(public),
             "accuracy_paper_keyframes": paper_public,
+            "accuracy_without_last_checks": summary(unchecked_public),
+            "checks_seen": seen,
+            "misses": misses,
         },
     )
 

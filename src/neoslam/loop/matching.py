@@ -165,7 +165,7 @@ def _ground(keyframe: Keyframe) -> tuple[np.ndarray, float]:
     return current, float(np.linalg.norm(centres - current, axis=1).max())
 
 
-def _uncontradicted(points: np.ndarray, labels, others: np.ndarray, other_labels, radius: float) -> np.ndarray:
+def _has_counterpart(points: np.ndarray, labels, others: np.ndarray, other_labels, radius: float) -> np.ndarray:
     """Bool per point: an object of the same label stands within `radius` among the others (ground plane)."""
     same = np.asarray(labels)[:, None] == np.asarray(other_labels)[None, :]
     distance = np.linalg.norm(points[:, None, :2] - others[None, :, :2], axis=2)
@@ -186,7 +186,7 @@ def contradictions(query: Keyframe, stored: Keyframe, transform: np.ndarray, con
     ):
         inside = np.linalg.norm(points[:, :2] - centre, axis=1) <= radius - config.contradiction_margin
         labels_inside = np.asarray(labels)[inside]
-        found = _uncontradicted(points[inside], labels_inside, others, other_labels, config.contradiction_radius)
+        found = _has_counterpart(points[inside], labels_inside, others, other_labels, config.contradiction_radius)
         count += int((~found).sum())
     return count
 
