@@ -19,7 +19,7 @@ import numpy as np
 
 from neoslam.evaluation.loops import LoopCriteria, judge_closures, true_revisits
 from neoslam.geometry import invert_pose, transform_points
-from neoslam.loop.matching import _required_matches, match_keyframes
+from neoslam.loop.matching import _has_counterpart, _required_matches, match_keyframes
 from neoslam.pipeline import NeoSLAM
 from neoslam.types import Keyframe
 
@@ -40,9 +40,7 @@ def _true_centres(keyframe: Keyframe, truth: np.ndarray) -> np.ndarray:
 
 def _shared_objects(query: Keyframe, stored: Keyframe, truth: np.ndarray) -> int:
     q, s = _true_centres(query, truth), _true_centres(stored, truth)
-    same = np.asarray(query.labels)[:, None] == np.asarray(stored.labels)[None, :]
-    close = np.linalg.norm(q[:, None, :2] - s[None, :, :2], axis=2) <= SAME_OBJECT_M
-    return int((same & close).any(axis=1).sum())
+    return int(_has_counterpart(q, query.labels, s, stored.labels, SAME_OBJECT_M).sum())
 
 
 def _classify(slam: NeoSLAM, query: Keyframe, stored: Keyframe, truth: np.ndarray, relocalised: bool) -> str:

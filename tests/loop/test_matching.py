@@ -370,17 +370,16 @@ def test_a_copy_is_not_contradicted(make_keyframe) -> None:
 def test_contradictions_count_what_either_keyframe_misses_inside_the_other(make_keyframe, change, expected) -> None:
     stored = _street_keyframe(make_keyframe, STREET)
     centres, labels = STREET.copy(), ["car"] * len(STREET)
-    middle = MIDDLE
     if change == "drop one in the middle":
-        centres, labels = np.delete(centres, middle, axis=0), labels[:-1]
+        centres, labels = np.delete(centres, MIDDLE, axis=0), labels[:-1]
     elif change == "drop one at the edge":  # the car at x = 0; the one at x = 55 keeps the query's ground
         centres, labels = centres[1:], labels[1:]
     elif change == "add a stranger in the middle":
         centres, labels = np.vstack([centres, [22.5, -8.0, 0.0]]), [*labels, "bicycle"]
     elif change.startswith("move one"):
-        centres[middle, 1] += float(change.split()[2])
+        centres[MIDDLE, 1] += float(change.split()[2])
     elif change == "relabel one":
-        labels[middle] = "truck"
+        labels[MIDDLE] = "truck"
     query = _street_keyframe(make_keyframe, centres, labels)
     assert contradictions(query, stored, np.eye(4), CONFIG) == expected
 

@@ -157,12 +157,11 @@ def _fit(query: np.ndarray, stored: np.ndarray, config: MatchingConfig, needed: 
     return transform, inliers
 
 
-def _ground(keyframe: Keyframe) -> tuple[np.ndarray, float]:
+def _ground(centres: np.ndarray, robot: np.ndarray) -> tuple[np.ndarray, float]:
     """Centre and radius (ground plane) of what a keyframe covers: its current object, the one nearest the robot
     (paper 3.2), and the farthest of its objects from it."""
-    centres = keyframe.centers[:, :2]
-    current = centres[np.argmin(np.linalg.norm(centres - keyframe.pose[:2, 3], axis=1))]
-    return current, float(np.linalg.norm(centres - current, axis=1).max())
+    current = centres[np.argmin(np.linalg.norm(centres[:, :2] - robot[:2], axis=1)), :2]
+    return current, float(np.linalg.norm(centres[:, :2] - current, axis=1).max())
 
 
 def _has_counterpart(points: np.ndarray, labels, others: np.ndarray, other_labels, radius: float) -> np.ndarray:
@@ -176,9 +175,8 @@ def contradictions(query: Keyframe, stored: Keyframe, transform: np.ndarray, con
     """Objects of either keyframe that the fit (query world -> stored world) puts at least `contradiction_margin`
     inside the other keyframe's ground with no object of their label within `contradiction_radius` there."""
     moved = transform_points(transform, query.centers)
-    query_centre, query_radius = _ground(query)
-    query_centre = transform_points(transform, np.append(query_centre, 0.0)[None])[0, :2]
-    stored_centre, stored_radius = _ground(stored)
+    query_centre, query_radius = _ground(moved, (transform @ query.pose)[:3, 3])
+    stored_centre, stored_radius = _ground(stored.centers, stored.pose[:3, 3])
     count = 0
     for points, labels, others, other_labels, centre, radius in (
         (moved, query.labels, stored.centers, stored.labels, stored_centre, stored_radius),
