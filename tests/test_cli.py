@@ -267,6 +267,10 @@ BAD_INPUTS = {
         ["simulate", "--route", "block", "--noise", "bogus", "--out", "{d}/o"],
         ["noise profile", "bogus"],
     ),
+    "unknown detection profile": (
+        ["simulate", "--route", "block", "--detector", "bogus", "--out", "{d}/o"],
+        ["detection profile", "bogus", "real", "ideal"],
+    ),
     "unknown route": (["simulate", "--route", "nowhere", "--out", "{d}/o"], ["route", "nowhere"]),
     "unknown trajectory format": (
         ["simulate", "--trajectory", "{d}/ok.txt", "--format", "xyz", "--out", "{d}/o"],
@@ -382,7 +386,8 @@ BLOCK_FRAMES = 600  # the block route up to its first revisit of the start: a fe
 
 @pytest.fixture(scope="module")
 def block_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """The simulated block route (vo noise), run with `--backend relaxation` and with `--backend pose-graph`."""
+    """The simulated block route (vo noise, the ideal detection profile: a rich street that closes loops), run with
+    `--backend relaxation` and with `--backend pose-graph`."""
     from neoslam.io.trajectory_files import write_tum
     from neoslam.sim.routes import ROUTES, drive_route
 
@@ -390,7 +395,8 @@ def block_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     sim = NeoSLAMConfig().simulator
     truth = drive_route(ROUTES["block"], sim.frame_period, sim.camera.height_above_ground)
     write_tum(root / "block.txt", truth.subset(np.arange(BLOCK_FRAMES)))
-    _ok("simulate", "--trajectory", root / "block.txt", "--noise", "vo", "--seed", 2, "--out", root / "data", "-q")
+    simulate = ["simulate", "--trajectory", root / "block.txt", "--noise", "vo", "--detector", "ideal", "--seed", 2]
+    _ok(*simulate, "--out", root / "data", "-q")
     outs = {}
     for backend in ("relaxation", "pose-graph"):
         outs[backend] = root / backend
@@ -567,3 +573,35 @@ def test_missing_detector_model_is_one_line(shared_data: Path, tmp_path: Path) -
 def test_image_options_need_a_kitti_root(workspace: Path, tmp_path: Path) -> None:
     result = _invoke("run", workspace / "data", "--sequence", "06", "--out", tmp_path / "o", "-q")
     _assert_one_line_error(result, ["--sequence", "KITTI image sequences only"])
+
+
+# --- neoslam detect ---
+
+
+def test_detect_writes_what_run_reads(shared_data: Path, tmp_path: Path) -> None:
+    """`neoslam detect` runs the detector once; `run --detections` on its file maps what a run with the detector
+    maps (same detections, so the same objects)."""
+    root = shared_data / "kitti_mini"
+    dets = tmp_path / "dets.jsonl"
+    result = _ok("detect", root, "--sequence", "06", "--out", dets, "-q")
+    assert f"wrote {dets}" in result.stdout
+    lines = [json.loads(line) for line in dets.read_text().splitlines()]
+    assert [line["frame"] for line in lines] == list(range(12))
+    assert sum(len(line["detections"]) for line in lines) >= 12
+    _ok("run", root, "--sequence", "06", "--out", tmp_path / "with_file", "--detections", dets, "-q")
+    _ok("run", root, "--sequence", "06", "--out", tmp_path / "with_detector", "-q")
+    objects = [(tmp_path / name / "objects.csv").read_text() for name in ("with_file", "with_detector")]
+    assert objects[0] == objects[1]
+
+
+def test_detect_refuses_an_existing_file_and_bad_roots(shared_data: Path, tmp_path: Path) -> None:
+    existing = tmp_path / "mine.jsonl"
+    existing.write_text("keep me\n")
+    result = _invoke("detect", shared_data / "kitti_mini", "--sequence", "06", "--out", existing, "-q")
+    _assert_one_line_error(result, ["mine.jsonl", "exists", "--overwrite"])
+    assert existing.read_text() == "keep me\n"
+    result = _invoke("detect", shared_data / "kitti_mini", "--out", tmp_path / "d.jsonl", "-q")
+    _assert_one_line_error(result, ["--sequence", "sequences here: 06"])
+    result = _invoke("detect", tmp_path, "--sequence", "06", "--out", tmp_path / "d.jsonl", "-q")
+    _assert_one_line_error(result, [str(tmp_path), "not a KITTI odometry root"])
+    assert not (tmp_path / "d.jsonl").exists() and not [p for p in tmp_path.iterdir() if "partial" in p.name]

@@ -170,3 +170,13 @@ def test_integrate_single_frame() -> None:
     start = _random_poses(1, seed=9)[0]
     poses = integrate_body_velocities(np.zeros((1, 3)), np.zeros((1, 3)), np.array([0.0]), start=start)
     np.testing.assert_allclose(poses, start[None])
+
+
+def test_planar_motion_is_negative_when_reversing() -> None:
+    from neoslam.geometry import planar_motion
+
+    start = make_pose(np.eye(3), np.zeros(3))
+    turned = make_pose(np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]), np.zeros(3))  # facing +y
+    assert planar_motion(start, make_pose(np.eye(3), [2.0, 0.0, 0.5])) == pytest.approx((2.0, 0.0, 0.5))
+    assert planar_motion(start, make_pose(np.eye(3), [-2.0, 0.0, 0.0]))[0] == pytest.approx(-2.0)
+    assert planar_motion(turned, turned @ make_pose(np.eye(3), [-1.5, 0.0, 0.0]))[0] == pytest.approx(-1.5)

@@ -61,6 +61,9 @@ def simulate(
     times: Annotated[Path | None, typer.Option(help="KITTI times.txt for --trajectory.")] = None,
     route: Annotated[str | None, typer.Option(help="Built-in route instead of a file: town, block.")] = None,
     noise: Annotated[str | None, typer.Option(help=f"Odometry noise: {', '.join(NOISE_PROFILES)}.")] = None,
+    detector: Annotated[
+        str | None, typer.Option(help="Detection profile: real (calibrated to the real front end, default), ideal.")
+    ] = None,
     seed: Annotated[int | None, typer.Option(help="Seed of every random draw.")] = None,
     config: ConfigOption = None,
     overwrite: OverwriteOption = False,
@@ -73,7 +76,7 @@ def simulate(
     try:
         if trajectory is not None and route is not None:
             raise ConfigError("give either --trajectory or --route, not both")
-        settings = simulation_config(load_config(config), noise, seed)
+        settings = simulation_config(load_config(config), noise, seed, detector)
         check_target(out, overwrite)
         recording = record(settings, trajectory, fmt, times, route, progress=not quiet)
         simulate_dataset(out, recording, overwrite)
@@ -89,7 +92,8 @@ def run_command(
     out: OutOption = Path("results"),
     sequence: Annotated[str | None, typer.Option(help="KITTI sequence under a KITTI odometry root, e.g. 06.")] = None,
     detections: Annotated[
-        Path | None, typer.Option(help="Detections file (JSON lines) instead of the built-in YOLOX detector.")
+        Path | None,
+        typer.Option(help="Detections file (JSON lines, see `neoslam detect`) instead of the built-in detector."),
     ] = None,
     odometry: Annotated[
         Path | None, typer.Option(help="Odometry poses (TUM or KITTI, one per image) instead of stereo odometry.")
@@ -117,6 +121,26 @@ def run_command(
     if metrics.get("perception"):
         rows += [("perception frames per second (median)", metrics["perception"]["fps_median"])]
     typer.echo(_table(rows))
+
+
+@app.command()
+def detect(
+    data: Annotated[Path, typer.Argument(help="KITTI odometry root (sequences/NN/image_0 ...).")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Detections file to write (JSON lines).")],
+    sequence: Annotated[str | None, typer.Option(help="KITTI sequence under the root, e.g. 06.")] = None,
+    config: ConfigOption = None,
+    overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an existing file.")] = False,
+    quiet: QuietOption = False,
+) -> None:
+    """Run the configured detector over a sequence's left images and write the detections in the JSON-lines
+    format that `neoslam run --detections` reads."""
+    from neoslam.jobs import detect_sequence
+
+    try:
+        counts = detect_sequence(data, sequence, out, load_config(config), overwrite, progress=not quiet)
+    except (NeoSLAMError, OSError) as error:
+        _fail(error)
+    typer.echo(f"wrote {out}: {counts['detections']} detections in {counts['frames']} frames")
 
 
 @app.command()

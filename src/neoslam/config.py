@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from neoslam.errors import ConfigError, InputError
 from neoslam.perception.config import PerceptionConfig
@@ -70,6 +70,9 @@ class WorldConfig(_Section):
     lateral_offset: float = Field(5.0, gt=0, description="distance of parked objects from the route centre, m")
     lateral_jitter: float = Field(0.6, ge=0, description="std of the lateral placement, m")
     min_separation: float = Field(3.0, gt=0, description="no two objects closer than this, m")
+    road_clearance: float = Field(
+        3.0, gt=0, description="no object centre is placed closer than this to any part of the route, m"
+    )
     revisit_radius: float = Field(8.0, gt=0, description="route points this close to an earlier pass place nothing")
     class_mix: dict[str, float] = Field(
         default_factory=lambda: {"car": 0.70, "truck": 0.08, "bicycle": 0.10, "person": 0.12},
@@ -77,6 +80,33 @@ class WorldConfig(_Section):
     )
     moving_fraction: float = Field(0.0, ge=0, le=1, description="share of objects that move along the road")
     moving_speed: float = Field(1.5, ge=0, description="speed of moving objects, m/s")
+    rows: tuple[tuple[float, float, float], ...] | None = Field(
+        None,
+        description="rows of objects instead of both sides at lateral_offset with occupancy and lateral_jitter: "
+        "(signed lateral offset from the route, m, left positive; objects per 100 m of route; std of the lateral "
+        "placement, m), each a line of slots every `spacing` metres",
+    )
+
+    @model_validator(mode="after")
+    def _rows_fit_the_slots(self) -> WorldConfig:
+        for offset, density, jitter in self.rows or ():
+            if offset == 0 or jitter < 0 or not 0 <= density * self.spacing / 100.0 <= 1:
+                raise ValueError(
+                    f"row ({offset}, {density}, {jitter}): needs a non-zero offset, 0 to {100.0 / self.spacing:.3g} "
+                    f"objects per 100 m (one slot every spacing = {self.spacing} m) and a jitter >= 0"
+                )
+        return self
+
+
+def _check_table(table: tuple[tuple[float, float], ...] | None, upper: float | None) -> None:
+    """A (key, value) table to interpolate: keys strictly increasing, values in [0, upper]."""
+    if table is None:
+        return
+    keys = [key for key, _ in table]
+    if not table or any(b <= a for a, b in zip(keys, keys[1:], strict=False)):
+        raise ValueError("needs at least one (key, value) pair, keys strictly increasing")
+    if any(value < 0 or (upper is not None and value > upper) for _, value in table):
+        raise ValueError(f"values must lie in [0, {upper}]")
 
 
 class DetectionNoiseConfig(_Section):
@@ -98,6 +128,51 @@ class DetectionNoiseConfig(_Section):
     texture_individuality: float = Field(
         0.5, ge=0, le=1, description="0: all objects of a class look alike, 1: every object looks unique"
     )
+    detection_probability: tuple[tuple[float, float], ...] | None = Field(
+        None,
+        description="(depth, m; probability that a visible object is detected and placed) points, interpolated "
+        "linearly and held beyond the ends; None: 1 - the linear miss_rate model",
+    )
+    column_factor: tuple[tuple[float, float], ...] | None = Field(
+        None,
+        description="(offset of the object's image column from the principal point, as a share of the half image "
+        "width: 0 on the axis, 1 at the edge; factor on detection_probability) points, interpolated; None: 1",
+    )
+    border_margin: float | None = Field(
+        None,
+        ge=0,
+        description="an object whose box comes this close to the image border (or reaches behind the camera) is cut "
+        "off and not placed, px, as the real stereo step does (perception.stereo.border_margin); None: placed",
+    )
+    occlusion_cover: float | None = Field(
+        None,
+        gt=0,
+        le=1,
+        description="an object whose box is covered by at least this share by nearer objects' boxes is hidden; "
+        "None: no occlusion",
+    )
+    max_range: float | None = Field(
+        None,
+        gt=0,
+        description="objects farther than this are not reported, m (the real stereo step: "
+        "perception.stereo.max_depth); None: camera.max_range",
+    )
+    false_positive_depth: tuple[float, float] | None = Field(
+        None, description="depth range of false positives, m; None: 3 x camera.min_range to camera.max_range"
+    )
+
+    @field_validator("detection_probability", "column_factor")
+    @classmethod
+    def _tables(cls, table, info):
+        _check_table(table, 1.0 if info.field_name == "detection_probability" else None)
+        return table
+
+    @field_validator("false_positive_depth")
+    @classmethod
+    def _depth_range(cls, depths):
+        if depths is not None and not 0 < depths[0] <= depths[1]:
+            raise ValueError("needs 0 < near <= far")
+        return depths
 
 
 class OdometryNoiseConfig(_Section):
@@ -136,9 +211,22 @@ class SimulatorConfig(_Section):
     camera: CameraConfig = CameraConfig()
     world: WorldConfig = WorldConfig()
     detection: DetectionNoiseConfig = DetectionNoiseConfig()
+    detection_profile: str = Field(
+        "real",
+        description="named detection model and street (see neoslam.sim.profiles: real, calibrated to the real front "
+        "end on KITTI 06; ideal, the earlier richer model): it fills `detection` and `world`, and the fields given "
+        "there override it",
+    )
     noise_profile: str = Field("vo", description="name of the odometry noise profile (see NOISE_PROFILES)")
     odometry: OdometryNoiseConfig = OdometryNoiseConfig()
     frame_period: float = Field(0.1037, gt=0, description="s between frames when no times are given (KITTI mean)")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _apply_detection_profile(cls, data: Any) -> Any:
+        from neoslam.sim.profiles import with_detection_profile  # the profiles are built from this module's models
+
+        return with_detection_profile(data) if isinstance(data, dict) else data
 
 
 class GridCellConfig(_Section):
@@ -234,6 +322,15 @@ class KeyframeConfig(_Section):
     e_max: float = Field(1.5, gt=0, description="e_max of eq. 2, m (paper)")
     neighbourhood_radius: float = Field(
         30.0, gt=0, description="objects this close to the current object join its keyframe, m (paper: e_max)"
+    )
+    sparse_objects: int = Field(
+        8,
+        gt=0,
+        description="where fewer objects stand within neighbourhood_radius (a sparse street: real KITTI streets "
+        "through a real detector), the neighbourhood grows until it holds this many",
+    )
+    sparse_neighbourhood_radius: float = Field(
+        60.0, gt=0, description="the largest the neighbourhood grows to on a sparse street, m"
     )
     spacing: float = Field(5.0, gt=0, description="a keyframe every this many metres of travel")
     min_objects: int = Field(4, gt=0, description="fewer objects in the neighbourhood make no keyframe")
@@ -393,7 +490,7 @@ class NeoSLAMConfig(_Section):
     """Everything, one section per component."""
 
     perception: PerceptionConfig = PerceptionConfig()
-    simulator: SimulatorConfig = SimulatorConfig()
+    simulator: SimulatorConfig = Field(default_factory=SimulatorConfig)
     grid_cells: GridCellConfig = GridCellConfig()
     head_direction: HeadDirectionConfig = HeadDirectionConfig()
     object_vector: ObjectVectorConfig = ObjectVectorConfig()

@@ -169,12 +169,16 @@ def body_velocities(poses: np.ndarray, timestamps: np.ndarray) -> tuple[np.ndarr
 
 
 def planar_motion(previous: np.ndarray, current: np.ndarray) -> tuple[float, float, float]:
-    """The 4-DoF motion NeuroSLAM integrates between two poses T_world_robot: horizontal distance (m), yaw change
-    (rad, wrapped to [-pi, pi)) and vertical change (m)."""
+    """The 4-DoF motion NeuroSLAM integrates between two poses T_world_robot: horizontal distance (m), negative
+    when the robot moved backwards (against its previous heading), yaw change (rad, wrapped to [-pi, pi)) and
+    vertical change (m). The grid cells move along the heading by this distance, so a robot that reverses moves
+    them back, not on."""
     step = current[:3, 3] - previous[:3, 3]
     yaw_change = float(yaw_of(current) - yaw_of(previous))
     yaw_change = (yaw_change + np.pi) % (2 * np.pi) - np.pi
-    return float(np.hypot(step[0], step[1])), yaw_change, float(step[2])
+    heading = previous[:2, 0]  # the robot's x axis: forward
+    direction = -1.0 if float(step[:2] @ heading) < 0 else 1.0
+    return direction * float(np.hypot(step[0], step[1])), yaw_change, float(step[2])
 
 
 def fit_yaw_translation(source: np.ndarray, target: np.ndarray) -> np.ndarray:

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
+from tqdm import tqdm
 
 from neoslam.config import NOISE_PROFILES, NeoSLAMConfig
 from neoslam.datasets.kitti import is_kitti_root, read_kitti_sequence, sequences_in
@@ -17,7 +18,7 @@ from neoslam.errors import ConfigError, InputError
 from neoslam.evaluation.report import cell_metrics, loop_metrics, timing_metrics, trajectory_metrics
 from neoslam.evaluation.trajectory_metrics import associate
 from neoslam.geometry import SimilarityTransform, fit_yaw_translation
-from neoslam.io.atomic import atomic_directory
+from neoslam.io.atomic import atomic_directory, atomic_file
 from neoslam.io.results import (
     read_loop_closures,
     write_config,
@@ -31,6 +32,7 @@ from neoslam.io.results import (
 from neoslam.io.trajectory_files import read_trajectory
 from neoslam.perception.frontend import ImageDataset, open_front_end
 from neoslam.pipeline import RunResult, run
+from neoslam.sim.profiles import DETECTION_PROFILES
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.sim.simulator import SimulatedRecording, simulate
 from neoslam.types import Frame, Trajectory
@@ -51,6 +53,7 @@ __all__ = [
     "record",
     "simulate_dataset",
     "run_dataset",
+    "detect_sequence",
     "evaluate_files",
 ]
 
@@ -69,13 +72,21 @@ class Dataset(Protocol):
     def frames(self) -> Iterator[Frame]: ...
 
 
-def simulation_config(config: NeoSLAMConfig, noise: str | None, seed: int | None) -> NeoSLAMConfig:
-    """The config with a named odometry noise profile and a seed applied to its simulator section."""
+def simulation_config(
+    config: NeoSLAMConfig, noise: str | None, seed: int | None, detector: str | None = None
+) -> NeoSLAMConfig:
+    """The config with a named odometry noise profile, a named detection profile (its detection and street values
+    replace the config's) and a seed applied to its simulator section."""
     update: dict[str, Any] = {}
     if noise is not None:
         if noise not in NOISE_PROFILES:
             raise ConfigError(f"unknown noise profile {noise!r}; choose one of {', '.join(NOISE_PROFILES)}")
         update |= {"noise_profile": noise, "odometry": NOISE_PROFILES[noise]}
+    if detector is not None:
+        if detector not in DETECTION_PROFILES:
+            raise ConfigError(f"unknown detection profile {detector!r}; choose one of {', '.join(DETECTION_PROFILES)}")
+        profile = DETECTION_PROFILES[detector]
+        update |= {"detection_profile": detector, "detection": profile.detection, "world": profile.world}
     if seed is not None:
         update["seed"] = seed
     return config.model_copy(update={"simulator": config.simulator.model_copy(update=update)})
@@ -245,6 +256,32 @@ def run_dataset(
         write_metrics(staging / "metrics.json", metrics)
         _plots(staging / "plots", result, dataset.ground_truth, config.matching.score_threshold)
     return metrics
+
+
+def detect_sequence(
+    root: Path,
+    sequence_name: str | None,
+    out: Path,
+    config: NeoSLAMConfig,
+    overwrite: bool = False,
+    progress: bool = True,
+) -> dict[str, int]:
+    """Run the configured detector over a KITTI sequence's left images and write its detections as JSON lines
+    (the format `--detections` reads), so that a detector runs once and its output can be inspected and reused."""
+    from neoslam.perception.detections_file import write_detections_file
+    from neoslam.perception.detector import make_detector
+
+    if not is_kitti_root(root):
+        raise InputError(root, "not a KITTI odometry root (sequences/NN/image_0, image_1, calib.txt, times.txt)")
+    if sequence_name is None:
+        raise InputError(root, f"a KITTI root needs --sequence NN (sequences here: {', '.join(sequences_in(root))})")
+    sequence = read_kitti_sequence(root, sequence_name)
+    with atomic_file(out, overwrite) as staging:
+        detector = make_detector(config.perception.detector)
+        indices = tqdm(range(len(sequence)), desc="detect", unit="frame", disable=not progress, leave=False)
+        per_frame = {i: detector.detect(i, sequence.left_image(i)) for i in indices}
+        write_detections_file(staging, per_frame)
+    return {"frames": len(per_frame), "detections": sum(len(d) for d in per_frame.values())}
 
 
 def evaluate_files(

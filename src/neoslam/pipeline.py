@@ -110,7 +110,7 @@ class NeoSLAM:
         )
         self._grid_centre = centre
         self._previous_odometry = frame.odometry_pose
-        return float(np.hypot(horizontal, vertical))
+        return float(np.hypot(horizontal, vertical))  # the odometer counts reversing as travel too
 
     def _learn_object_vectors(self, keyframe: Keyframe) -> None:
         """Train the OVCN, one epoch per `keyframes_per_epoch` keyframes, for `epochs` epochs (paper 3.4)."""

@@ -265,7 +265,7 @@ def _judged(closures, truth_positions: np.ndarray):
 
 
 def _run_route(name: str, seed: int, folder: Path):
-    write_dataset(folder, simulate_route(name, SimulatorConfig(seed=seed)))
+    write_dataset(folder, simulate_route(name, SimulatorConfig(seed=seed, detection_profile="ideal")))
     dataset = read_dataset(folder)
     return dataset, run(dataset.frames(), NeoSLAMConfig(), total=len(dataset), progress=False)
 
@@ -298,7 +298,7 @@ def _detected_closures(dataset) -> tuple[list, list]:
 
 
 def test_the_town_route_is_not_fooled_by_its_repeated_layout(tmp_path: Path) -> None:
-    write_dataset(tmp_path / "town", simulate_route("town", SimulatorConfig(seed=0)))
+    write_dataset(tmp_path / "town", simulate_route("town", SimulatorConfig(seed=0, detection_profile="ideal")))
     dataset = read_dataset(tmp_path / "town")
     keyframes, closures = _detected_closures(dataset)
     repeat = ROUTES["town"].repeats[0]

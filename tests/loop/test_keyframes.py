@@ -16,6 +16,7 @@ from neoslam.types import ObjectObservation
 
 POINT = "sign"  # a label without a footprint: its stereo centre is taken as is
 DEFAULTS = KeyframeConfig()
+FIXED_RADIUS = {"sparse_objects": 1}  # the neighbourhood never grows: every street counts as dense
 
 
 def _seen(point_robot, label: str = POINT, grey: float = 128) -> ObjectObservation:
@@ -210,7 +211,7 @@ def test_a_keyframe_every_spacing_metres_with_consecutive_ids() -> None:
 
 def test_keyframe_is_the_current_object_and_its_neighbourhood() -> None:
     config = DEFAULTS.model_copy(
-        update={"footprints": {}, "min_observations": 1, "neighbourhood_radius": 6.0, "min_objects": 3}
+        update={**FIXED_RADIUS, "footprints": {}, "min_observations": 1, "neighbourhood_radius": 6.0, "min_objects": 3}
     )
     pose = _at(100.0, 50.0, yaw=np.radians(30))
     #   A: nearest the robot (current);  B, C within 6 m of A;  D 8 m from A (4 m from B);  E far.
@@ -228,7 +229,7 @@ def test_keyframe_is_the_current_object_and_its_neighbourhood() -> None:
 
 def test_no_keyframe_with_fewer_than_min_objects_around_the_current_object() -> None:
     config = DEFAULTS.model_copy(
-        update={"footprints": {}, "min_observations": 1, "neighbourhood_radius": 6.0, "min_objects": 4}
+        update={**FIXED_RADIUS, "footprints": {}, "min_observations": 1, "neighbourhood_radius": 6.0, "min_objects": 4}
     )
     builder = KeyframeBuilder(config)
     few = (_seen([4, 2, 0], "A"), _seen([8, 2, 0], "B"), _seen([4, -3, 0], "C"), _seen([12, 2, 0], "D"))
@@ -250,3 +251,28 @@ def test_keyframe_patches_are_the_mean_of_the_observed_patches() -> None:
         keyframe = builder.add(frame, np.eye(4), (_seen([10, 2, 0], grey=grey),), 0.0)
     assert keyframe is not None and keyframe.patches.shape == (1, 16, 16)
     np.testing.assert_allclose(keyframe.patches, 30.0)
+
+
+def test_on_a_sparse_street_the_neighbourhood_grows_to_hold_more_objects() -> None:
+    config = DEFAULTS.model_copy(
+        update={
+            "footprints": {},
+            "min_observations": 1,
+            "neighbourhood_radius": 6.0,
+            "min_objects": 3,
+            "sparse_objects": 4,
+            "sparse_neighbourhood_radius": 15.0,
+        }
+    )
+    # A is the current object; B and C stand within 6 m of it, D 8 m and E 11 m away, F 40 m away. Only three
+    # within 6 m: the radius grows to the 4th nearest (D, 8 m), so D joins and E does not.
+    points = {"A": [4, 2, 0], "B": [8, 2, 0], "C": [4, -3, 0], "D": [12, 2, 0], "E": [15, 2, 0], "F": [44, 2, 0]}
+    seen = {label: _seen(p, label) for label, p in points.items()}
+    keyframe = KeyframeBuilder(config).add(0, _at(0.0), tuple(seen.values()), 0.0)
+    assert keyframe is not None and sorted(keyframe.labels) == ["A", "B", "C", "D"]
+    # A dense street (four objects within 6 m) keeps the plain radius.
+    dense = (*seen.values(), _seen([6, 0, 0], "G"))
+    keyframe = KeyframeBuilder(config).add(0, _at(0.0), dense, 0.0)
+    assert keyframe is not None and sorted(keyframe.labels) == ["A", "B", "C", "G"]
+    # Never beyond the sparse radius: F, 40 m from A, does not make up the numbers.
+    assert KeyframeBuilder(config).add(0, _at(0.0), (seen["A"], seen["B"], seen["F"]), 0.0) is None

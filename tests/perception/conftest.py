@@ -1,4 +1,4 @@
-"""Fixtures of the perception tests: the YOLOX-Nano model and detectors built from it."""
+"""Fixtures of the perception tests: the shared models and detectors built from them."""
 
 from __future__ import annotations
 
@@ -6,7 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from neoslam.perception.config import DetectorConfig
+from neoslam.perception.config import DetectionPass, DetectorConfig
+
+SMALL_PASS = DetectionPass(scale=416 / 1242)  # the whole frame shrunk to YOLOX-Nano's exported 416 px
 
 
 @pytest.fixture(scope="session")
@@ -16,16 +18,22 @@ def yolox_model(shared_data: Path) -> Path:
 
 
 @pytest.fixture(scope="session")
-def yolox_detector(yolox_model: Path):
-    """A YoloxDetector on the whole frame only (default config otherwise)."""
-    from neoslam.perception.detector import YoloxDetector
-
-    return YoloxDetector(DetectorConfig(model=yolox_model, tiling=False))
+def yolo11_model(shared_data: Path) -> Path:
+    """Path of the shared YOLO11n ONNX model (AGPL-3.0 weights: read from the shared data, never copied)."""
+    return shared_data / "models" / "yolo11n_coco" / "yolo11n_coco.onnx"
 
 
 @pytest.fixture(scope="session")
-def yolox_tiling_detector(yolox_model: Path):
-    """A YoloxDetector that also runs square tiles across the frame."""
-    from neoslam.perception.detector import YoloxDetector
+def yolox_detector(yolox_model: Path):
+    """The default YOLOX detector (the whole frame at its own resolution)."""
+    from neoslam.perception.detector import make_detector
 
-    return YoloxDetector(DetectorConfig(model=yolox_model, tiling=True))
+    return make_detector(DetectorConfig(model=yolox_model))
+
+
+@pytest.fixture(scope="session")
+def yolox_small_detector(yolox_model: Path):
+    """YOLOX on the whole frame shrunk to 416 px wide, as the model was exported."""
+    from neoslam.perception.detector import make_detector
+
+    return make_detector(DetectorConfig(model=yolox_model, passes=[SMALL_PASS]))

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from neoslam.errors import InputError
+from neoslam.perception.detection import Detection
 from neoslam.perception.detections_file import DetectionsFile, write_detections_file
-from neoslam.perception.detector import Detection
 
 CLASSES = ["car", "truck", "bicycle", "person"]
 GOOD = {"label": "car", "score": 0.9, "box": [10.0, 20.0, 110.0, 80.0]}

@@ -13,8 +13,8 @@ from neoslam.sim.simulator import SimulatedRecording, simulate_route
 
 @pytest.fixture(scope="session")
 def block_recording() -> SimulatedRecording:
-    """The route "block" (816 frames) with the default simulator settings, seed 0."""
-    return simulate_route("block", SimulatorConfig())
+    """The route "block" (816 frames) with the ideal detection profile (a rich street), seed 0."""
+    return simulate_route("block", SimulatorConfig(detection_profile="ideal"))
 
 
 @pytest.fixture(scope="session")

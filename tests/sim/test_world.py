@@ -11,7 +11,7 @@ from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.sim.world import CLASS_SIZES, World, build_world
 from neoslam.types import Trajectory
 
-CONFIG = SimulatorConfig()
+CONFIG = SimulatorConfig(detection_profile="ideal")  # both sides of the street at lateral_offset
 HEIGHT = CONFIG.camera.height_above_ground
 
 

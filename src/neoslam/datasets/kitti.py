@@ -133,15 +133,19 @@ class KittiSequence:
 
     def stereo_pair(self, index: int) -> tuple[np.ndarray, np.ndarray]:
         """Left and right grey images of a frame, checked against the calibrated size."""
+        return self._checked(self.left_images[index]), self._checked(self.right_images[index])
+
+    def left_image(self, index: int) -> np.ndarray:
+        """The left grey image of a frame (what the detector sees), checked against the calibrated size."""
+        return self._checked(self.left_images[index])
+
+    def _checked(self, path: Path) -> np.ndarray:
+        image = read_grey_image(path)
         expected = (self.camera.height, self.camera.width)
-        pair = []
-        for path in (self.left_images[index], self.right_images[index]):
-            image = read_grey_image(path)
-            if image.shape != expected:
-                problem = f"image is {image.shape[1]}x{image.shape[0]}, the sequence's are {expected[1]}x{expected[0]}"
-                raise InputError(path, problem)
-            pair.append(image)
-        return pair[0], pair[1]
+        if image.shape != expected:
+            problem = f"image is {image.shape[1]}x{image.shape[0]}, the sequence's are {expected[1]}x{expected[0]}"
+            raise InputError(path, problem)
+        return image
 
 
 def read_kitti_sequence(root: Path, sequence: str) -> KittiSequence:

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from neoslam.errors import OutputError
 
-__all__ = ["check_target", "atomic_directory"]
+__all__ = ["check_target", "atomic_directory", "atomic_file"]
 
 
 def check_target(target: Path, overwrite: bool = False) -> None:
@@ -40,3 +40,23 @@ def atomic_directory(target: Path, overwrite: bool = False) -> Iterator[Path]:
     if target.exists():
         shutil.rmtree(target)
     staging.rename(target)
+
+
+@contextmanager
+def atomic_file(target: Path, overwrite: bool = False) -> Iterator[Path]:
+    """Yield a temporary path beside `target`; on success it replaces `target`, on failure it vanishes.
+
+    An existing `target` is refused unless `overwrite`, and a folder always.
+    """
+    if target.is_dir():
+        raise OutputError(f"{target}: is a folder, not a file")
+    if target.exists() and not overwrite:
+        raise OutputError(f"{target}: file exists (pass --overwrite to replace it)")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    staging = target.parent / f".{target.name}.partial-{os.getpid()}"
+    try:
+        yield staging
+    except BaseException:
+        staging.unlink(missing_ok=True)
+        raise
+    os.replace(staging, target)

@@ -4,7 +4,9 @@ Single stereo frames see few objects with depth noise that grows with the square
 first fused over a short stretch of road (the local window), where odometry drift is small: each window object is
 the inverse-variance weighted mean of its observations, moved to the world with the pose estimate of the frame
 that saw them. Every `spacing` metres of travel, the window object nearest to the robot becomes the current
-object and, with the window objects within `neighbourhood_radius` of it, a keyframe.
+object and, with the window objects within `neighbourhood_radius` of it, a keyframe. On a sparse street, where
+fewer than `sparse_objects` stand that close, the neighbourhood grows (up to `sparse_neighbourhood_radius`) to
+take them.
 """
 
 from __future__ import annotations
@@ -118,9 +120,7 @@ class KeyframeBuilder:
             return None
         positions = np.array([o.position for o in objects])
         current = int(np.argmin(np.linalg.norm(positions[:, :2] - pose[:2, 3], axis=1)))  # the current object
-        around = np.flatnonzero(
-            np.linalg.norm(positions - positions[current], axis=1) <= self.config.neighbourhood_radius
-        )
+        around = self._neighbourhood(np.linalg.norm(positions - positions[current], axis=1))
         if len(around) < self.config.min_objects:
             return None
         keyframe = Keyframe(
@@ -133,3 +133,15 @@ class KeyframeBuilder:
         )
         self._next_id += 1
         return keyframe
+
+    def _neighbourhood(self, distances: np.ndarray) -> np.ndarray:
+        """Indices of the objects within `neighbourhood_radius` of the current object; where fewer than
+        `sparse_objects` stand that close (a sparse street), the radius grows until it holds them, up to
+        `sparse_neighbourhood_radius`: a keyframe of barely `min_objects` rarely verifies, since every one of its
+        objects must then be matched."""
+        radius = self.config.neighbourhood_radius
+        wanted = self.config.sparse_objects
+        if np.count_nonzero(distances <= radius) < wanted:
+            nearest = np.sort(distances)[min(wanted, len(distances)) - 1]
+            radius = min(max(radius, nearest), self.config.sparse_neighbourhood_radius)
+        return np.flatnonzero(distances <= radius)

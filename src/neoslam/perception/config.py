@@ -2,25 +2,55 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-__all__ = ["DetectorConfig", "StereoObjectConfig", "StereoOdometryConfig", "PerceptionConfig"]
+__all__ = ["DetectionPass", "DetectorConfig", "StereoObjectConfig", "StereoOdometryConfig", "PerceptionConfig"]
 
 
 class _Section(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
-class DetectorConfig(_Section):
-    """Object detection: YOLOX-Nano (COCO) through onnxruntime, or detections read from a file (paper: YOLO)."""
+DATA_ENV = "NEOSLAM_DATA"  # where the shared data (models among it) lives
+DEFAULT_DATA = Path("../shared/data")  # without NEOSLAM_DATA, relative to the working directory
+DEFAULT_MODELS = {
+    "yolox": Path("models/yolox_nano_coco/yolox_nano.onnx"),
+    "yolo11": Path("models/yolo11n_coco/yolo11n_coco.onnx"),
+}
 
-    source: Literal["yolox", "file"] = Field("yolox", description="yolox: run the ONNX model; file: --detections")
-    model: Path = Field(
-        Path("../shared/data/models/yolox_nano_coco/yolox_nano.onnx"),
-        description="YOLOX ONNX model (input [1,3,S,S] BGR 0-255, output [1,N,85]); see README for how to get it",
+
+class DetectionPass(_Section):
+    """A window of the image that the network sees, enlarged by `scale` (the network input is the window's size
+    times the scale, rounded up to a multiple of 32 px)."""
+
+    rows: tuple[float, float] = Field((0.0, 1.0), description="top and bottom of the window, shares of the height")
+    columns: tuple[float, float] = Field((0.0, 1.0), description="left and right of the window, shares of the width")
+    scale: float = Field(1.0, gt=0, le=4, description="enlargement of the window for the network")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> DetectionPass:
+        for name, (low, high) in (("rows", self.rows), ("columns", self.columns)):
+            if not 0.0 <= low < high <= 1.0:
+                raise ValueError(f"{name} must be two shares 0 <= start < end <= 1, got {[low, high]}")
+        return self
+
+
+class DetectorConfig(_Section):
+    """Object detection: a YOLO network through onnxruntime, or detections read from a file (paper: YOLO)."""
+
+    source: Literal["yolox", "yolo11", "file"] = Field(
+        "yolox",
+        description="yolox: YOLOX-Nano (Apache-2.0, default); yolo11: YOLO11n, which you select and obtain yourself "
+        "(AGPL-3.0 weights); file: detections read with --detections",
+    )
+    model: Path | None = Field(
+        None,
+        description="the ONNX model; none: $NEOSLAM_DATA (default ../shared/data)/models/yolox_nano_coco/"
+        "yolox_nano.onnx for yolox, .../yolo11n_coco/yolo11n_coco.onnx for yolo11 (see README for how to get them)",
     )
     labels_file: Path | None = Field(
         None,
@@ -31,8 +61,19 @@ class DetectorConfig(_Section):
         default_factory=lambda: ["car", "truck", "bicycle", "person"],
         description="classes NeoSLAM keeps (paper: car, truck, bicycle, person)",
     )
-    input_size: int = Field(416, gt=0, description="side of the square network input, px (YOLOX-Nano: 416)")
-    score_threshold: float = Field(0.35, ge=0, le=1, description="objectness x class score to keep a box")
+    passes: list[DetectionPass] = Field(
+        default_factory=lambda: [
+            DetectionPass(scale=0.5),
+            DetectionPass(rows=(0.32, 0.78), scale=1.5),
+        ],
+        min_length=1,
+        description="windows the network looks at: by default the whole frame at half size (near objects) and the "
+        "band of rows that holds KITTI's road and parked cars enlarged 1.5x (distant ones). At the 416 px YOLOX-Nano "
+        "was exported for, a KITTI frame shrinks threefold and most parked cars are lost (benchmarks/perception.py)",
+    )
+    score_threshold: float = Field(
+        0.45, ge=0, le=1, description="score (objectness x class) to keep a box (chosen on the labelled frames)"
+    )
     nms_iou: float = Field(0.45, gt=0, le=1, description="class-wise non-maximum suppression IoU")
     duplicate_iou: float = Field(
         0.65,
@@ -41,22 +82,29 @@ class DetectorConfig(_Section):
         description="boxes of different classes overlapping more than this are one object seen "
         "as two (car and truck): the lower score goes; 1 keeps both (a cyclist's person and bicycle overlap ~0.55)",
     )
-    tiling: bool = Field(
-        True,
-        description="also run square tiles (side = image height) over the frame: finds small distant objects (on "
-        "kitti_mini 1.5x the cars, at 3x the detection time)",
+    min_box_height: float = Field(
+        12.0, ge=0, description="smaller boxes are dropped, px (KITTI's object benchmark ignores them too)"
     )
-    tile_overlap: float = Field(0.2, ge=0, lt=1, description="least share of a tile that overlaps its neighbour")
-    tile_span: float = Field(
-        0.5,
-        gt=0,
-        le=1,
-        description="share of the image width, centred, that the tiles cover: distant objects gather about the "
-        "vanishing point (KITTI: 2 tiles for 88 % of the cars that 4 tiles across the whole width find, at 60 % "
-        "of the time)",
+    cut_margin: float = Field(
+        4.0,
+        ge=0,
+        description="a box this close to an edge of its window that lies inside the image holds an object the "
+        "window cuts, px: left to the windows that see it whole",
     )
-    min_box_height: float = Field(10.0, ge=0, description="smaller boxes are dropped, px")
-    threads: int = Field(2, gt=0, description="onnxruntime intra-op threads")
+    contrast_clip: float = Field(
+        3.0,
+        ge=0,
+        description="contrast-limited histogram equalisation (CLAHE) of the image before detection: its clip "
+        "limit; 0 switches it off (KITTI's grey frames are dark where cars stand in shade)",
+    )
+    contrast_tiles: int = Field(8, gt=0, le=64, description="CLAHE tiles across each side of the image")
+    threads: int = Field(2, gt=0, le=64, description="onnxruntime intra-op threads")
+
+    def model_path(self) -> Path:
+        """The configured model, else the source's default under $NEOSLAM_DATA."""
+        if self.model is not None:
+            return self.model
+        return Path(os.environ.get(DATA_ENV, DEFAULT_DATA)) / DEFAULT_MODELS.get(self.source, DEFAULT_MODELS["yolox"])
 
 
 class StereoObjectConfig(_Section):
@@ -79,12 +127,24 @@ class StereoObjectConfig(_Section):
         3.0, ge=0, description="boxes this close to the image border hold a cut-off object and are not placed, px"
     )
     min_points: int = Field(5, gt=0, description="an object needs this many triangulated keypoints")
+    min_visible_share: float = Field(
+        0.35,
+        ge=0,
+        le=1,
+        description="a box less unhidden than this by boxes reaching lower in the image (nearer objects on the road) "
+        "is not placed: most of its keypoints are the nearer object's",
+    )
     inlier_sigmas: float = Field(2.5, gt=0, description="keypoints this many robust std from the median depth go")
     min_depth_spread: float = Field(
         0.3, gt=0, description="least robust depth std of an object's keypoints, m (a car is deeper than a plane)"
     )
     min_depth: float = Field(1.0, gt=0, description="objects closer than this are dropped, m")
-    max_depth: float = Field(40.0, gt=0, description="objects farther than this are dropped, m")
+    max_depth: float = Field(
+        60.0,
+        gt=0,
+        description="objects farther than this are dropped, m (the keyframe fusion weighs far, noisy views little; "
+        "on a real street many parked cars are placed only at 40-60 m, before hedges and other cars hide them)",
+    )
     patch_size: int = Field(16, gt=1, description="side of the grey appearance patch, px (as the simulator's)")
 
 

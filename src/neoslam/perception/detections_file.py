@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from neoslam.errors import InputError
-from neoslam.perception.detector import Detection
+from neoslam.perception.detection import Detection
 
 __all__ = ["DetectionsFile", "write_detections_file", "parse_line"]
 

@@ -15,21 +15,39 @@ from typing import Protocol
 
 import numpy as np
 
-from neoslam.datasets.kitti import KittiSequence
+from neoslam.config import CameraConfig
 from neoslam.errors import ConfigError, InputError
 from neoslam.geometry import body_velocities, invert_pose
 from neoslam.io.frames import camera_poses_to_robot
 from neoslam.io.trajectory_files import read_trajectory
 from neoslam.perception.config import PerceptionConfig
+from neoslam.perception.detection import ObjectDetector
 from neoslam.perception.detections_file import DetectionsFile
-from neoslam.perception.detector import ObjectDetector, YoloxDetector
+from neoslam.perception.detector import make_detector
 from neoslam.perception.odometry import StereoOdometry
 from neoslam.perception.stereo import ObjectTriangulator
 from neoslam.types import Frame, ObjectObservation, Trajectory
 
-__all__ = ["MotionSource", "PerceptionTimes", "StereoFrontEnd", "ImageDataset", "open_front_end"]
+__all__ = ["StereoSequence", "MotionSource", "PerceptionTimes", "StereoFrontEnd", "ImageDataset", "open_front_end"]
 
 STAGES = ("read", "detection", "stereo", "odometry")
+
+
+class StereoSequence(Protocol):
+    """Rectified stereo frames with their calibration and times: a KITTI sequence, a replay of one, ..."""
+
+    camera: CameraConfig
+    timestamps: np.ndarray
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def ground_truth(self) -> Trajectory | None: ...  # evaluation only
+
+    def __len__(self) -> int: ...
+
+    def stereo_pair(self, index: int) -> tuple[np.ndarray, np.ndarray]: ...
 
 
 class MotionSource(Protocol):
@@ -117,7 +135,7 @@ class StereoFrontEnd:
 class ImageDataset:
     """A KITTI sequence seen through the front end; `frames()` is all the SLAM path sees."""
 
-    sequence: KittiSequence
+    sequence: StereoSequence
     front_end: StereoFrontEnd
 
     @property
@@ -156,18 +174,18 @@ def _pose_file_motion(path: Path, frames: int) -> PoseFileMotion:
 
 
 def open_front_end(
-    sequence: KittiSequence,
+    sequence: StereoSequence,
     config: PerceptionConfig,
     detections: Path | None = None,
     odometry: Path | None = None,
 ) -> ImageDataset:
-    """The front end the config asks for: YOLOX or a detections file, stereo odometry or a pose file."""
+    """The front end the config asks for: a YOLO model or a detections file, stereo odometry or a pose file."""
     if detections is not None or config.detector.source == "file":
         if detections is None:
             raise ConfigError("perception.detector.source is 'file': give the detections with --detections FILE")
         detector: ObjectDetector = _detections_file(detections, config, len(sequence))
     else:
-        detector = YoloxDetector(config.detector)
+        detector = make_detector(config.detector)
     if odometry is not None or config.odometry.source == "poses":
         if odometry is None:
             raise ConfigError("perception.odometry.source is 'poses': give the pose file with --odometry FILE")

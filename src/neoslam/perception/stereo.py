@@ -15,13 +15,14 @@ import numpy as np
 
 from neoslam.config import CameraConfig
 from neoslam.perception.config import StereoObjectConfig
-from neoslam.perception.detector import Detection
+from neoslam.perception.detection import Detection
 from neoslam.types import ObjectObservation
 
-__all__ = ["StereoMatches", "match_stereo_keypoints", "triangulate", "ObjectTriangulator"]
+__all__ = ["StereoMatches", "match_stereo_keypoints", "triangulate", "unhidden_shares", "ObjectTriangulator"]
 
 MAD_TO_SIGMA = 1.4826  # median absolute deviation of a normal distribution, in standard deviations
 ORB_PATCH_SIZE = 31  # OpenCV's default ORB patch (and edge threshold), px
+OCCLUSION_SAMPLES = 20  # per side of a box, for the share of it that nearer boxes hide
 
 
 @dataclass(frozen=True)
@@ -174,6 +175,24 @@ def _agreeing_points(inside: np.ndarray, config: StereoObjectConfig) -> np.ndarr
     return agreeing if len(agreeing) >= config.min_points else None
 
 
+def unhidden_shares(boxes: np.ndarray) -> np.ndarray:
+    """The share of each box (x1, y1, x2, y2) not covered by a box whose bottom edge is lower in the image: on a
+    road, the object standing nearer. Grid-sampled, so that overlaps of several boxes are counted once."""
+    shares = np.ones(len(boxes))
+    for k, (x1, y1, x2, y2) in enumerate(boxes):
+        nearer = boxes[boxes[:, 3] > y2]
+        if len(nearer) == 0:
+            continue
+        xs = np.linspace(x1, x2, OCCLUSION_SAMPLES)
+        ys = np.linspace(y1, y2, OCCLUSION_SAMPLES)
+        u, v = (grid.ravel() for grid in np.meshgrid(xs, ys))
+        covered = np.zeros(len(u), bool)
+        for nx1, ny1, nx2, ny2 in nearer:
+            covered |= (u >= nx1) & (u <= nx2) & (v >= ny1) & (v <= ny2)
+        shares[k] = 1.0 - covered.mean()
+    return shares
+
+
 def _patch(image: np.ndarray, box: np.ndarray, size: int) -> np.ndarray:
     x1, y1, x2, y2 = np.round(box).astype(int)
     crop = image[max(y1, 0) : max(y2, y1 + 1), max(x1, 0) : max(x2, x1 + 1)]
@@ -218,9 +237,12 @@ class ObjectTriangulator:
         """Objects whose keypoints triangulate consistently, within the configured depth range."""
         boxes = np.array([d.box for d in detections], dtype=np.float64).reshape(-1, 4)
         points = [self._box_points(left, right, box) for box in boxes]
+        visible = unhidden_shares(boxes) >= self.config.min_visible_share
         observations = []
-        for detection, box, agreeing in zip(detections, boxes, self._visible_points(points, boxes), strict=True):
-            if agreeing is None or self._truncated(box):
+        for k, (detection, box, agreeing) in enumerate(
+            zip(detections, boxes, self._visible_points(points, boxes), strict=True)
+        ):
+            if agreeing is None or self._truncated(box) or not visible[k]:
                 continue
             centre = np.median(agreeing[:, :3], axis=0)
             if not self.config.min_depth <= centre[2] <= self.config.max_depth:

@@ -34,11 +34,12 @@ class StereoCamera:
         c = self.config
         return (pixels[:, 0] >= 0) & (pixels[:, 0] < c.width) & (pixels[:, 1] >= 0) & (pixels[:, 1] < c.height)
 
+    def extent(self, corners: np.ndarray) -> np.ndarray:
+        """Left-image box (x1, y1, x2, y2), not clipped, around the (8, 3) corners in front of the camera."""
+        pixels, _ = self.project(corners[corners[:, 2] > MIN_CORNER_DEPTH])
+        return np.concatenate([pixels.min(axis=0), pixels.max(axis=0)])
+
     def box(self, corners: np.ndarray) -> np.ndarray:
         """Left-image box (x1, y1, x2, y2), clipped to the image, around (8, 3) corners in the optical frame."""
-        front = corners[corners[:, 2] > MIN_CORNER_DEPTH]
-        pixels, _ = self.project(front)
         c = self.config
-        x1, y1 = np.clip(pixels.min(axis=0), 0, [c.width - 1, c.height - 1])
-        x2, y2 = np.clip(pixels.max(axis=0), 0, [c.width - 1, c.height - 1])
-        return np.array([x1, y1, x2, y2])
+        return np.clip(self.extent(corners), 0, [c.width - 1, c.height - 1, c.width - 1, c.height - 1])

@@ -1,5 +1,6 @@
 """Per frame, what YOLO plus ORB stereo matching report about the objects in view: label (sometimes confused),
-score, left and right boxes, a triangulated centre with disparity noise, misses, false positives and a patch."""
+score, left and right boxes, a triangulated centre with disparity noise, misses (by depth and image column),
+objects cut off by the image border or hidden behind nearer ones, false positives and a patch."""
 
 from __future__ import annotations
 
@@ -10,10 +11,11 @@ from scipy.spatial import cKDTree
 
 from neoslam.config import CameraConfig, DetectionNoiseConfig
 from neoslam.io.frames import robot_points_to_camera
-from neoslam.sim.camera import StereoCamera
+from neoslam.sim.camera import MIN_CORNER_DEPTH, StereoCamera
+from neoslam.sim.visibility import column_offset, cut_off, hidden
 from neoslam.sim.world import World
 
-__all__ = ["SimulatedDetection", "DetectionSimulator"]
+__all__ = ["SimulatedDetection", "InView", "DetectionSimulator"]
 
 FALSE_POSITIVE = -1  # object id of a detection with no object behind it
 MIN_DISPARITY = 0.5  # px: stereo matching gives up below this
@@ -35,6 +37,23 @@ class SimulatedDetection:
     object_id: int  # truth only: the object behind it, or FALSE_POSITIVE
 
 
+@dataclass(frozen=True)
+class InView:
+    """An object the detector could report at a pose: in range, its centre in the image, not cut off by the border
+    (when the noise model places no cut-off objects) and not hidden behind nearer ones (when it models occlusion)."""
+
+    index: int
+    centre: np.ndarray  # (3,) world frame
+    depth: float  # m, of the centre in the camera frame
+    column: float  # image column of the centre from the principal point, share of the half width
+
+
+def _interpolate(table: tuple[tuple[float, float], ...], key: float) -> float:
+    """Linear interpolation in a (key, value) table, held at the ends."""
+    keys, values = zip(*table, strict=True)
+    return float(np.interp(key, keys, values))
+
+
 def _yaw_matrix(yaw: float) -> np.ndarray:
     c, s = np.cos(yaw), np.sin(yaw)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -53,11 +72,16 @@ class DetectionSimulator:
         self._moving_ids = np.flatnonzero(~static)
         self._tree = cKDTree(world.positions[static, :2]) if static.any() else None
 
+    @property
+    def max_range(self) -> float:
+        """Depth beyond which nothing is reported, m."""
+        return self.noise.max_range or self.camera.config.max_range
+
     def _nearby(self, pose: np.ndarray, positions: np.ndarray) -> np.ndarray:
         cam = self.camera.config
         # The farthest point in view: max_range deep at the image's wider edge.
-        half_width = max(cam.cx, cam.width - cam.cx) / cam.fx * cam.max_range
-        reach = float(np.hypot(cam.max_range, half_width)) + self.world.sizes.max(initial=0.0)
+        half_width = max(cam.cx, cam.width - cam.cx) / cam.fx * self.max_range
+        reach = float(np.hypot(self.max_range, half_width)) + self.world.sizes.max(initial=0.0)
         ids = []
         if self._tree is not None:
             ids = self._static_ids[self._tree.query_ball_point(pose[:2, 3], reach)].tolist()
@@ -66,10 +90,69 @@ class DetectionSimulator:
 
     def detect(self, pose: np.ndarray, time: float, rng: np.random.Generator) -> list[SimulatedDetection]:
         """Detections at one true robot pose T_world_robot."""
-        positions = self.world.positions_at(time)
-        detections = [d for i in self._nearby(pose, positions) if (d := self._observe(i, positions[i], pose, rng))]
+        detections = [d for view in self.in_view(pose, time) if (d := self._observe(view, pose, rng))]
         detections += self._false_positives(rng)
         return detections
+
+    def in_view(self, pose: np.ndarray, time: float) -> list[InView]:
+        """The objects the detector could report at a true robot pose, in object order (no random draws)."""
+        cam = self.camera.config
+        positions = self.world.positions_at(time)
+        nearby = self._nearby(pose, positions)
+        views = []
+        for i in nearby:
+            centre_cam = self._to_camera(pose, positions[i][None])[0]
+            depth = centre_cam[2]
+            if not cam.min_range <= depth <= self.max_range:
+                continue
+            pixel, _ = self.camera.project(centre_cam[None])
+            if not self.camera.in_image(pixel)[0]:
+                continue
+            if self.noise.border_margin is not None and self._cut_off(i, positions[i], pose):
+                continue
+            views.append(InView(int(i), positions[i], float(depth), column_offset(float(pixel[0, 0]), cam)))
+        if self.noise.occlusion_cover is not None:
+            views = self._unhidden(views, nearby, positions, pose)
+        return views
+
+    def _corners_in_camera(self, index: int, centre: np.ndarray, pose: np.ndarray) -> np.ndarray:
+        corners = centre + (BOX_CORNERS * self.world.sizes[index]) @ _yaw_matrix(self.world.yaws[index]).T
+        return self._to_camera(pose, corners)
+
+    def _cut_off(self, index: int, centre: np.ndarray, pose: np.ndarray) -> bool:
+        corners = self._corners_in_camera(index, centre, pose)
+        behind = bool((corners[:, 2] <= MIN_CORNER_DEPTH).any())
+        return cut_off(self.camera.extent(corners), behind, self.camera.config, self.noise.border_margin)
+
+    def _unhidden(self, views: list[InView], nearby: np.ndarray, positions: np.ndarray, pose) -> list[InView]:
+        """The views whose box is not mostly covered by the boxes of nearer objects (seen or not)."""
+        boxes, depths, rows = [], [], {}
+        for i in nearby:
+            corners = self._corners_in_camera(i, positions[i], pose)
+            if not (corners[:, 2] > MIN_CORNER_DEPTH).any():
+                continue
+            box = self.camera.box(corners)
+            if box[2] > box[0] and box[3] > box[1]:
+                rows[int(i)] = len(boxes)
+                boxes.append(box)
+                depths.append(self._to_camera(pose, positions[i][None])[0, 2])
+        if not boxes:
+            return views
+        covered = hidden(np.array(boxes), np.array(depths), self.noise.occlusion_cover)
+        return [v for v in views if v.index not in rows or not covered[rows[v.index]]]
+
+    def _miss_probability(self, depth: float, column: float) -> float:
+        noise = self.noise
+        if noise.detection_probability is None:
+            rate = (
+                noise.miss_rate
+                + (noise.miss_rate_at_max_range - noise.miss_rate) * depth / self.camera.config.max_range
+            )
+        else:
+            rate = 1.0 - _interpolate(noise.detection_probability, depth)
+        if noise.column_factor is None:
+            return rate
+        return 1.0 - (1.0 - rate) * _interpolate(noise.column_factor, column)
 
     def _to_camera(self, pose: np.ndarray, points: np.ndarray) -> np.ndarray:
         return robot_points_to_camera((points - pose[:3, 3]) @ pose[:3, :3])
@@ -82,17 +165,9 @@ class DetectionSimulator:
         radius = 1.0 / np.sqrt(((in_object / (self.world.sizes[index] / 2)) ** 2).sum())
         return centre - self.noise.surface_bias * radius * ray
 
-    def _observe(self, index: int, centre: np.ndarray, pose: np.ndarray, rng) -> SimulatedDetection | None:
-        cam = self.camera.config
-        centre_cam = self._to_camera(pose, centre[None])[0]
-        depth = centre_cam[2]
-        if not cam.min_range <= depth <= cam.max_range:
-            return None
-        pixel, _ = self.camera.project(centre_cam[None])
-        if not self.camera.in_image(pixel)[0]:
-            return None
-        miss = self.noise.miss_rate + (self.noise.miss_rate_at_max_range - self.noise.miss_rate) * depth / cam.max_range
-        if rng.random() < miss:
+    def _observe(self, view: InView, pose: np.ndarray, rng) -> SimulatedDetection | None:
+        index, centre, depth = view.index, view.centre, view.depth
+        if rng.random() < self._miss_probability(depth, view.column):
             return None
         surface = self._to_camera(pose, self._measured_centre(index, centre, pose)[None])
         pixel, disparity = self.camera.project(surface)
@@ -100,8 +175,7 @@ class DetectionSimulator:
         disparity = disparity + rng.normal(0.0, self.noise.disparity_sigma)
         if disparity[0] < MIN_DISPARITY:
             return None
-        corners = centre + (BOX_CORNERS * self.world.sizes[index]) @ _yaw_matrix(self.world.yaws[index]).T
-        box = self.camera.box(self._to_camera(pose, corners)) + rng.normal(0.0, self.noise.box_sigma, 4)
+        box = self.camera.box(self._corners_in_camera(index, centre, pose)) + rng.normal(0.0, self.noise.box_sigma, 4)
         return SimulatedDetection(
             label=self._label(str(self.world.labels[index]), rng),
             score=self._score(depth, rng),
@@ -134,7 +208,7 @@ class DetectionSimulator:
         for _ in range(rng.poisson(self.noise.false_positives_per_frame)):
             side = rng.uniform(*FALSE_POSITIVE_BOX_PX)
             x1, y1 = rng.uniform(0, cam.width - side), rng.uniform(0, cam.height - side)
-            depth = rng.uniform(cam.min_range * 3, cam.max_range)
+            depth = rng.uniform(*(self.noise.false_positive_depth or (cam.min_range * 3, cam.max_range)))
             disparity = cam.fx * cam.baseline / depth
             box = np.array([x1, y1, x1 + side, y1 + side])
             centre = self.camera.back_project(np.array([[x1 + side / 2, y1 + side / 2]]), np.array([disparity]))[0]

@@ -23,12 +23,13 @@ CLASS_SIZES: dict[str, tuple[float, float, float]] = {
     "person": (0.6, 0.6, 1.75),
 }
 KERB_EXTRA = {"car": 0.0, "truck": 0.3, "bicycle": 1.5, "person": 2.0}  # m further out than parked cars
-ROAD_CLEARANCE = 3.0  # m: nothing is placed closer than this to any part of the route
+REPEAT_HALF_WIDTH = 12.0  # m: objects this far either side of a repeated stretch belong to it
 CENTRE_LINE_STEP = 0.5  # m
 MIN_CENTRE_LINE_SAMPLES = 3  # a shorter route (under about a metre) gets no objects
 TEXTURE_SMOOTHING = 1.5  # px, σ of the blur that gives textures structure
 TEXTURE_CONTRAST = 60.0  # grey levels, std of a texture around its mean
 TEXTURE_MEAN = 120.0  # grey level
+PER_100M = 100.0  # m: row densities are objects per 100 m of route
 
 
 @dataclass(frozen=True)
@@ -87,15 +88,25 @@ def _texture(prototype: np.ndarray, individuality: float, rng: np.random.Generat
     return TEXTURE_MEAN + TEXTURE_CONTRAST * mixed / mixed.std()
 
 
-def _slots(line: _CentreLine, config: WorldConfig, rng: np.random.Generator) -> list[tuple[int, float]]:
-    """(centre-line sample, signed lateral side) of every slot that holds an object."""
+def _rows(config: WorldConfig) -> tuple[tuple[float, float, float], ...]:
+    """(signed lateral offset, share of slots taken, lateral std) of each row of objects."""
+    if config.rows is None:
+        side = (config.occupancy, config.lateral_jitter)
+        return ((config.lateral_offset, *side), (-config.lateral_offset, *side))
+    return tuple((offset, density * config.spacing / PER_100M, jitter) for offset, density, jitter in config.rows)
+
+
+def _slots(line: _CentreLine, config: WorldConfig, rng: np.random.Generator) -> list[tuple[int, float, float]]:
+    """(centre-line sample, signed lateral offset of its row (left positive), lateral std) of every slot that holds an
+    object: both sides at lateral_offset with `occupancy`, or the configured rows at their densities."""
+    rows = _rows(config)
     spacing = int(config.spacing / CENTRE_LINE_STEP)
     slots = []
     for index in range(0, len(line.xy), spacing):
         jittered = min(index + int(rng.integers(0, max(spacing // 2, 1))), len(line.xy) - 1)
-        for side in (1.0, -1.0):
-            if rng.random() < config.occupancy and not line.revisited[jittered]:
-                slots.append((jittered, side))
+        for offset, occupancy, jitter in rows:
+            if rng.random() < occupancy and not line.revisited[jittered]:
+                slots.append((jittered, offset, jitter))
     return slots
 
 
@@ -105,13 +116,13 @@ def _place(line: _CentreLine, config: WorldConfig, patch: int, individuality: fl
     prototypes = _class_textures(classes, patch, rng)
     road = cKDTree(line.xy)
     placed: list[dict] = []
-    for index, side in _slots(line, config, rng):
+    for index, offset, jitter in _slots(line, config, rng):
         label = classes[int(rng.choice(len(classes), p=weights / weights.sum()))]
         heading = line.heading[index]
         normal = np.array([-np.sin(heading), np.cos(heading)])
-        lateral = config.lateral_offset + KERB_EXTRA[label] + rng.normal(0.0, config.lateral_jitter)
-        xy = line.xy[index] + side * lateral * normal
-        if road.query_ball_point(xy, ROAD_CLEARANCE):  # on another street (near a crossing)
+        lateral = abs(offset) + KERB_EXTRA[label] + rng.normal(0.0, jitter)
+        xy = line.xy[index] + np.sign(offset) * lateral * normal
+        if road.query_ball_point(xy, config.road_clearance):  # on the road or another street (near a crossing)
             continue
         if placed and np.linalg.norm(np.array([p["xy"] for p in placed]) - xy, axis=1).min() < config.min_separation:
             continue
@@ -140,7 +151,7 @@ def _repeat_layout(
 
     def inside(xy, start, heading) -> bool:
         along, across = local(xy, start, heading)
-        return 0.0 <= along < repeat.length and abs(across) < 2 * ROAD_CLEARANCE + 6.0
+        return 0.0 <= along < repeat.length and abs(across) < REPEAT_HALF_WIDTH
 
     kept = [p for p in placed if not inside(p["xy"], repeat.target_start, repeat.target_heading)]
     turn = repeat.target_heading - repeat.source_heading

@@ -1,0 +1,101 @@
+"""The whole system on real KITTI images (issue 11): keyframes along a real street, and a revisit that closes loops.
+
+(a) `kitti_06_51`, the 51 real stereo frames of KITTI 06 (60 m of a residential street) through the real front end
+    (default detector, ORB stereo, stereo odometry) and the pipeline: detections and placed objects a frame,
+    distinct mapped objects, keyframes and objects per keyframe, front-end frames a second, ATE.
+(b) A revisit of the same street's images: the frames forward, back to the start, and forward again through a
+    photometric change (gain 0.8, offset +15, noise sigma 3, blur sigma 0.7 px, shift (1.3, -0.8) px). Closures
+    from the third pass to the first, closures judged against the ground truth (true within 5 m), and the error of
+    each closure's relative pose. This is the same street's images played again, not an independent second drive.
+
+Both with the default detector and, with --yolo11 (its weights are AGPL-3.0, read from the shared data, never part
+of NeoSLAM), with YOLO11n.
+
+    python benchmarks/real_streets.py [--yolo11] [--json FILE]
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
+from neoslam.config import NeoSLAMConfig  # noqa: E402
+from neoslam.datasets.kitti import read_kitti_sequence  # noqa: E402
+from neoslam.datasets.replay import PhotometricChange, forward_back_forward  # noqa: E402
+from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error  # noqa: E402
+from neoslam.geometry import invert_pose  # noqa: E402
+from neoslam.perception.frontend import open_front_end  # noqa: E402
+from neoslam.pipeline import run  # noqa: E402
+
+THIRD_PASS = PhotometricChange(gain=0.8, offset=15.0, noise_sigma=3.0, blur_sigma=0.7, shift_x=1.3, shift_y=-0.8)
+TRUE_CLOSURE_M = 5.0
+
+
+def _street_row(name: str, config: NeoSLAMConfig) -> dict:
+    sequence = read_kitti_sequence(data_root() / "kitti_06_51", "06")
+    dataset = open_front_end(sequence, config.perception)
+    frames = list(dataset.frames())
+    result = run(iter(frames), config, total=len(frames), progress=False)
+    perception = dataset.front_end.times.summary()
+    keyframes = result.keyframes
+    return {
+        "detector": name,
+        "frames": len(frames),
+        "placed / frame": float(np.mean([len(f.observations) for f in frames])),
+        "mapped objects": len(result.objects),
+        "keyframes": len(keyframes),
+        "objects / keyframe": float(np.mean([len(k.labels) for k in keyframes])) if keyframes else 0.0,
+        "front end fps": perception["fps_median"],
+        "ATE corrected m": float(absolute_trajectory_error(result.estimate, sequence.ground_truth).rmse),
+    }
+
+
+def _revisit_row(name: str, config: NeoSLAMConfig) -> dict:
+    sequence = read_kitti_sequence(data_root() / "kitti_06_51", "06")
+    replay = forward_back_forward(sequence, THIRD_PASS)
+    frames = list(open_front_end(replay, config.perception).frames())
+    result = run(iter(frames), config, total=len(frames), progress=False)
+    truth = replay.ground_truth.poses
+    first_end, third_start = len(sequence), 2 * len(sequence) - 1
+    gaps = [np.linalg.norm(truth[c.query_frame, :3, 3] - truth[c.match_frame, :3, 3]) for c in result.loop_closures]
+    third_to_first = [c for c in result.loop_closures if c.query_frame >= third_start and c.match_frame < first_end]
+    pose_errors = [
+        np.linalg.norm(c.relative_pose[:2, 3] - (invert_pose(truth[c.match_frame]) @ truth[c.query_frame])[:2, 3])
+        for c in third_to_first
+    ]
+    third_keyframes = [k for k in result.keyframes if k.frame_index >= third_start]
+    later = [k for k in result.keyframes if k.frame_index >= first_end]
+    return {
+        "detector": name,
+        "frames": len(frames),
+        "keyframes (pass 1 / 3)": f"{len(result.keyframes) - len(later)} / {len(third_keyframes)}",
+        "closures": len(result.loop_closures),
+        "false closures": int(sum(g > TRUE_CLOSURE_M for g in gaps)),
+        "pass 3 -> pass 1": len(third_to_first),
+        "pass-3 keyframes closed": f"{len({c.query_keyframe for c in third_to_first})}/{len(third_keyframes)}",
+        "relative pose error m (max)": float(max(pose_errors)) if pose_errors else float("nan"),
+    }
+
+
+def main() -> None:
+    args = parse_args(__doc__.splitlines()[0], lambda p: p.add_argument("--yolo11", action="store_true"))
+    base = NeoSLAMConfig()
+    configs = {"YOLOX-Nano (default)": base}
+    if args.yolo11:
+        detector = base.perception.detector.model_copy(update={"source": "yolo11"})
+        perception = base.perception.model_copy(update={"detector": detector})
+        configs["YOLO11n"] = base.model_copy(update={"perception": perception})
+    street = [_street_row(name, config) for name, config in configs.items()]
+    print(markdown_table(street, list(street[0])))
+    print()
+    revisit = [_revisit_row(name, config) for name, config in configs.items()]
+    print(markdown_table(revisit, list(revisit[0])))
+    write_json(args.json, {"street": street, "revisit": revisit})
+
+
+if __name__ == "__main__":
+    main()
