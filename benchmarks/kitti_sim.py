@@ -6,6 +6,10 @@ show what that check costs under heavy drift). Loop closures are judged within 5
 Runs go two at a time (the machine has two cores); timing columns are per run.
 
     python benchmarks/kitti_sim.py [--quick] [--json FILE] [--sequences 05 08] [--profiles vo] [--seeds 1 2 3]
+                                   [--detectors real ideal]
+
+`--detectors`: the simulator's detection profiles (default: real, the street and detector calibrated to the real
+front end on KITTI 06; ideal, the richer street of the first benchmarks).
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
 from neoslam.config import load_config  # noqa: E402
 from neoslam.jobs import record, run_dataset, simulate_dataset, simulation_config, with_backend  # noqa: E402
+from neoslam.sim.profiles import DETECTION_PROFILES  # noqa: E402
 
 SEQUENCES = ["00", "02", "05", "06", "07", "08"]
 PROFILES = ["vo", "heavy"]
@@ -31,6 +36,7 @@ def _arguments(parser) -> None:
     parser.add_argument("--sequences", nargs="+", default=SEQUENCES)
     parser.add_argument("--profiles", nargs="+", default=PROFILES)
     parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
+    parser.add_argument("--detectors", nargs="+", default=["real"], choices=sorted(DETECTION_PROFILES))
 
 
 def _without_cell_check(config):
@@ -38,9 +44,9 @@ def _without_cell_check(config):
     return config.model_copy(update={"experience_map": experience_map})
 
 
-def measure(job: tuple[str, str, int]) -> dict:
-    sequence, profile, seed = job
-    config = simulation_config(load_config(environ={}), profile, seed)
+def measure(job: tuple[str, str, str, int]) -> dict:
+    sequence, detector, profile, seed = job
+    config = simulation_config(load_config(environ={}), profile, seed, detector)
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp) / "data"
         simulate_dataset(data, record(config, trajectory=data_root() / "kitti" / "poses" / f"{sequence}.txt"))
@@ -53,6 +59,7 @@ def measure(job: tuple[str, str, int]) -> dict:
     graph = metrics["pose_graph"]
     return {
         "sequence": sequence,
+        "detector": detector,
         "profile": profile,
         "seed": seed,
         "frames": graph["frames"],
@@ -78,26 +85,26 @@ def measure(job: tuple[str, str, int]) -> dict:
 
 
 def _medians(rows: list[dict], keys: list[str]) -> list[dict]:
-    groups: dict[tuple[str, str], list[dict]] = {}
+    groups: dict[tuple[str, str, str], list[dict]] = {}
     for row in rows:
-        groups.setdefault((row["sequence"], row["profile"]), []).append(row)
+        groups.setdefault((row["sequence"], row["detector"], row["profile"]), []).append(row)
     summary = []
-    for (sequence, profile), group in groups.items():
+    for (sequence, detector, profile), group in groups.items():
         present = {k: [r[k] for r in group if r[k] is not None] for k in keys}
         values = {k: statistics.median(v) if v else None for k, v in present.items()}
-        summary.append({"sequence": sequence, "profile": profile, "seeds": len(group)} | values)
+        summary.append({"sequence": sequence, "detector": detector, "profile": profile, "seeds": len(group)} | values)
     return summary
 
 
 def main() -> None:
     args = parse_args(__doc__.splitlines()[0], _arguments)
     sequences, seeds = (["05"], args.seeds[:1]) if args.quick else (args.sequences, args.seeds)
-    jobs = [(s, p, seed) for s in sequences for p in args.profiles for seed in seeds]
+    jobs = [(s, d, p, seed) for s in sequences for d in args.detectors for p in args.profiles for seed in seeds]
     with Pool(2) as pool:
         rows = pool.map(measure, jobs, chunksize=1)
-    columns = ["sequence", "profile", "seed", "frames", "ate_odometry_m", "ate_relaxation_m", "ate_pose_graph_m",
-               "ate_pose_graph_no_cell_check_m", "loops_accepted", "loops_false", "loop_precision", "loop_recall",
-               "rejected_by_cells", "loops_false_no_cell_check", "fps", "ms_per_frame_median",
+    columns = ["sequence", "detector", "profile", "seed", "frames", "ate_odometry_m", "ate_relaxation_m",
+               "ate_pose_graph_m", "ate_pose_graph_no_cell_check_m", "loops_accepted", "loops_false", "loop_precision",
+               "loop_recall", "rejected_by_cells", "loops_false_no_cell_check", "fps", "ms_per_frame_median",
                "ms_per_frame_p95"]  # fmt: skip
     print(markdown_table(rows, columns))
     keys = ["ate_odometry_m", "ate_relaxation_m", "ate_pose_graph_m", "ate_pose_graph_no_cell_check_m",
@@ -105,7 +112,7 @@ def main() -> None:
             "loop_recall", "fps", "wall_s", "ms_per_frame_median", "ms_per_frame_p95"]  # fmt: skip
     medians = _medians(rows, keys)
     print("\nMedian over seeds:\n")
-    print(markdown_table(medians, ["sequence", "profile", "seeds", *keys]))
+    print(markdown_table(medians, ["sequence", "detector", "profile", "seeds", *keys]))
     write_json(args.json, {"rows": rows, "medians": medians})
 
 

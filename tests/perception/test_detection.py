@@ -147,3 +147,11 @@ def test_class_names_fall_back_to_coco(tmp_path: Path) -> None:
     assert load_class_names(tmp_path / "model.onnx", tmp_path / "mine.txt", name) == ("x",)
     with pytest.raises(InputError, match="missing.txt"):
         load_class_names(tmp_path / "model.onnx", tmp_path / "missing.txt", name)
+
+
+def test_a_window_that_covers_no_pixel_is_a_config_error() -> None:
+    from neoslam.errors import ConfigError
+
+    config = DetectorConfig(passes=[DetectionPass(), DetectionPass(rows=(0.5, 0.501))])
+    with pytest.raises(ConfigError, match=r"passes\[1\]: covers no pixel of a 100x100 image"):
+        windows_of(config, (100, 100))

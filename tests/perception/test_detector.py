@@ -15,10 +15,10 @@ from neoslam.evaluation.detection import box_iou
 from neoslam.perception.config import DetectionPass, DetectorConfig
 from neoslam.perception.detection import COCO_CLASSES, Detection
 from neoslam.perception.detector import make_detector
+from neoslam.perception.grid_model import make_grid
 from neoslam.perception.onnx_session import free_input_size
 from neoslam.perception.yolo11 import decode as decode_yolo11
 from neoslam.perception.yolox import decode as decode_yolox
-from neoslam.perception.yolox import make_grid
 
 CAR = COCO_CLASSES.index("car")
 TRUCK = COCO_CLASSES.index("truck")

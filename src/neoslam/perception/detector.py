@@ -33,7 +33,13 @@ class DetectionModel(Protocol):
 
 def windows_of(config: DetectorConfig, image_size: tuple[int, int]) -> list[Window]:
     """The windows the configured passes make of an image of (width, height) px."""
-    return [Window.of(image_size, tuple(p.rows), tuple(p.columns), p.scale) for p in config.passes]
+    windows = [Window.of(image_size, tuple(p.rows), tuple(p.columns), p.scale) for p in config.passes]
+    for index, window in enumerate(windows):
+        if window.x1 <= window.x0 or window.y1 <= window.y0:
+            raise ConfigError(
+                f"perception.detector.passes[{index}]: covers no pixel of a {image_size[0]}x{image_size[1]} image"
+            )
+    return windows
 
 
 class WindowedDetector:

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from neoslam.boxes import covered_share
 from neoslam.config import CameraConfig
 from neoslam.perception.config import StereoObjectConfig
 from neoslam.perception.detection import Detection
@@ -177,20 +178,8 @@ def _agreeing_points(inside: np.ndarray, config: StereoObjectConfig) -> np.ndarr
 
 def unhidden_shares(boxes: np.ndarray) -> np.ndarray:
     """The share of each box (x1, y1, x2, y2) not covered by a box whose bottom edge is lower in the image: on a
-    road, the object standing nearer. Grid-sampled, so that overlaps of several boxes are counted once."""
-    shares = np.ones(len(boxes))
-    for k, (x1, y1, x2, y2) in enumerate(boxes):
-        nearer = boxes[boxes[:, 3] > y2]
-        if len(nearer) == 0:
-            continue
-        xs = np.linspace(x1, x2, OCCLUSION_SAMPLES)
-        ys = np.linspace(y1, y2, OCCLUSION_SAMPLES)
-        u, v = (grid.ravel() for grid in np.meshgrid(xs, ys))
-        covered = np.zeros(len(u), bool)
-        for nx1, ny1, nx2, ny2 in nearer:
-            covered |= (u >= nx1) & (u <= nx2) & (v >= ny1) & (v <= ny2)
-        shares[k] = 1.0 - covered.mean()
-    return shares
+    road, the object standing nearer."""
+    return np.array([1.0 - covered_share(box, boxes[boxes[:, 3] > box[3]], OCCLUSION_SAMPLES) for box in boxes])
 
 
 def _patch(image: np.ndarray, box: np.ndarray, size: int) -> np.ndarray:

@@ -9,34 +9,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from neoslam.errors import InputError
-from neoslam.perception.config import DetectorConfig
-from neoslam.perception.detection import letterbox, load_class_names, network_size
-from neoslam.perception.onnx_session import open_session
+from neoslam.perception.grid_model import GridModel
 
-__all__ = ["STRIDES", "YoloxModel", "make_grid", "decode"]
+__all__ = ["YoloxModel", "decode"]
 
-STRIDES = (8, 16, 32)  # YOLOX heads, finest first: the order of the output rows
 BOX_COLUMNS = 4  # dx, dy, log w, log h
 OBJECTNESS_COLUMN = 4
 FIRST_CLASS_COLUMN = 5
-LABELS_FILE_NAME = "coco_classes.txt"  # looked for beside the model when no labels_file is configured
+MAX_LOG_SIZE = 20.0  # exp of a wild size logit would overflow
 MODEL_HELP = (
     "get yolox_nano.onnx (and coco_classes.txt) from the GitHub repository Kazuhito00/YOLOX-ONNX-TFLite-Sample, "
     "folder model/ (see shared/data/models/README.md), and set perception.detector.model to it; "
     "or run another detector and pass its output with --detections FILE"
 )
-
-
-def make_grid(width: int, height: int, strides: tuple[int, ...] = STRIDES) -> tuple[np.ndarray, np.ndarray]:
-    """Cell offsets (N, 2) as (gx, gy) and the stride (N, 1) of each output row, in the model's row order, for an
-    input of width x height px."""
-    cells, cell_strides = [], []
-    for stride in strides:
-        gy, gx = np.mgrid[0 : height // stride, 0 : width // stride]  # row-major: x varies fastest
-        cells.append(np.stack([gx.ravel(), gy.ravel()], axis=1))
-        cell_strides.append(np.full((gx.size, 1), stride))
-    return np.concatenate(cells).astype(np.float32), np.concatenate(cell_strides).astype(np.float32)
 
 
 def decode(rows: np.ndarray, grid: np.ndarray, strides: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -46,7 +31,7 @@ def decode(rows: np.ndarray, grid: np.ndarray, strides: np.ndarray) -> tuple[np.
     rather than, say, a car and a truck at the same place.
     """
     centres = (rows[:, :2] + grid) * strides
-    sizes = np.exp(np.minimum(rows[:, 2:BOX_COLUMNS], 20.0)) * strides  # exp of a wild logit would overflow
+    sizes = np.exp(np.minimum(rows[:, 2:BOX_COLUMNS], MAX_LOG_SIZE)) * strides
     boxes = np.concatenate([centres - sizes / 2, centres + sizes / 2], axis=1)
     class_scores = rows[:, FIRST_CLASS_COLUMN:]
     class_ids = np.argmax(class_scores, axis=1)
@@ -54,32 +39,20 @@ def decode(rows: np.ndarray, grid: np.ndarray, strides: np.ndarray) -> tuple[np.
     return boxes, scores, class_ids
 
 
-class YoloxModel:
-    """A YOLOX network that turns one image window into boxes (window px), scores and class ids."""
+class YoloxModel(GridModel):
+    """YOLOX: BGR 0-255 in, one row per cell out."""
 
-    def __init__(self, config: DetectorConfig) -> None:
-        model = self.model_path = config.model_path()
-        self.session = open_session(model, config.threads, MODEL_HELP)
-        self.class_names = load_class_names(model, config.labels_file, LABELS_FILE_NAME)
-        self._input_name = self.session.get_inputs()[0].name
-        columns = self.session.get_outputs()[0].shape[-1]
-        if isinstance(columns, int) and columns != FIRST_CLASS_COLUMN + len(self.class_names):
-            raise InputError(
-                config.labels_file or model,
-                f"{len(self.class_names)} class names but the model gives {columns - FIRST_CLASS_COLUMN} classes",
-            )
-        self._grids: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+    help_text = MODEL_HELP
 
-    def infer(self, window_bgr: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Every cell's box in window px, score and class id, the window enlarged by `scale` for the network."""
-        size = network_size(window_bgr.shape[1], window_bgr.shape[0], scale)
-        padded, r = letterbox(window_bgr, size, scale)
-        blob = np.ascontiguousarray(padded.transpose(2, 0, 1)[np.newaxis], dtype=np.float32)
-        rows = self.session.run(None, {self._input_name: blob})[0][0]
-        if size not in self._grids:
-            self._grids[size] = make_grid(*size)
-        grid, strides = self._grids[size]
-        if len(rows) != len(grid):
-            raise InputError(self.model_path, f"gives {len(rows)} rows for a {size} input, expected {len(grid)}")
-        boxes, scores, class_ids = decode(rows, grid, strides)
-        return boxes.astype(np.float64) / r, scores.astype(np.float64), class_ids
+    def _blob(self, padded_bgr: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(padded_bgr.transpose(2, 0, 1)[np.newaxis], dtype=np.float32)
+
+    def _cells(self, output: np.ndarray) -> np.ndarray:
+        return output
+
+    def _classes_given(self, output_shape: list) -> int | None:
+        columns = output_shape[-1]
+        return columns - FIRST_CLASS_COLUMN if isinstance(columns, int) else None
+
+    def _decode(self, cells: np.ndarray, grid: np.ndarray, strides: np.ndarray):
+        return decode(cells, grid, strides)

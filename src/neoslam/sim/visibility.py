@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from neoslam.boxes import covered_share
 from neoslam.config import CameraConfig
 
 __all__ = ["cut_off", "hidden", "column_offset"]
@@ -20,26 +21,15 @@ def cut_off(extent: np.ndarray, behind: bool, camera: CameraConfig, margin: floa
     return behind or not inside
 
 
-def _samples(box: np.ndarray) -> np.ndarray:
-    """(COVER_SAMPLES², 2) points at the centres of a regular grid over the box."""
-    steps = (np.arange(COVER_SAMPLES) + 0.5) / COVER_SAMPLES
-    xs = box[0] + steps * (box[2] - box[0])
-    ys = box[1] + steps * (box[3] - box[1])
-    return np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
-
-
 def hidden(boxes: np.ndarray, depths: np.ndarray, cover: float) -> np.ndarray:
     """(n,) True for each box of (n, 4) whose share covered by the boxes of nearer objects reaches `cover`."""
-    result = np.zeros(len(boxes), dtype=bool)
-    for i, box in enumerate(boxes):
-        nearer = boxes[depths < depths[i]]
-        if len(nearer) == 0:
-            continue
-        points = _samples(box)[:, None, :]
-        inside = (points[..., 0] >= nearer[:, 0]) & (points[..., 0] <= nearer[:, 2])
-        inside &= (points[..., 1] >= nearer[:, 1]) & (points[..., 1] <= nearer[:, 3])
-        result[i] = inside.any(axis=1).mean() >= cover
-    return result
+    return np.array(
+        [
+            covered_share(box, boxes[depths < depth], COVER_SAMPLES) >= cover
+            for box, depth in zip(boxes, depths, strict=True)
+        ],
+        dtype=bool,
+    )
 
 
 def column_offset(u: float, camera: CameraConfig) -> float:
