@@ -51,7 +51,11 @@ MAP_SIZES = [100, 500, 1000, 2000, 5000]
 QUICK_MAP_SIZES = [100, 1000, 5000]
 QUERIES = 200
 TILE_OFFSET_M = 1500.0  # copies of the KITTI 00 keyframes are laid this far apart
-PAPER_KEYFRAMES = {"neighbourhood_radius": 1.5, "min_objects": 1}  # paper 3.2: "all objects within e_max = 1.5 m"
+PAPER_KEYFRAMES = {  # paper 3.2: "all objects within e_max = 1.5 m", never grown on a sparse street
+    "neighbourhood_radius": 1.5,
+    "min_objects": 1,
+    "sparse_objects": 1,
+}
 WITHOUT_LAST_CHECKS = {"max_contradictions": 10**6, "max_yaw_drift_deg": 360.0}
 EXACT_EIGENVECTOR = {"power_iterations": 100, "power_tolerance": 1e-9}  # the power iteration run to convergence
 
