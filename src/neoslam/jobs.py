@@ -274,7 +274,8 @@ def detect_sequence(
     if not is_kitti_root(root):
         raise InputError(root, "not a KITTI odometry root (sequences/NN/image_0, image_1, calib.txt, times.txt)")
     if sequence_name is None:
-        raise InputError(root, f"a KITTI root needs --sequence NN (sequences here: {', '.join(sequences_in(root))})")
+        found = ", ".join(sequences_in(root)) or "none"
+        raise InputError(root, f"a KITTI root needs --sequence NN (sequences here: {found})")
     sequence = read_kitti_sequence(root, sequence_name)
     with atomic_file(out, overwrite) as staging:
         detector = make_detector(config.perception.detector)

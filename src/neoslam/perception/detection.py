@@ -90,7 +90,9 @@ class Window:
     scale: float
 
     @classmethod
-    def of(cls, image_size: tuple[int, int], rows: tuple[float, float], columns: tuple[float, float], scale: float):
+    def of(
+        cls, image_size: tuple[int, int], rows: tuple[float, float], columns: tuple[float, float], scale: float
+    ) -> Window:
         """The window over the given shares of the image's rows and columns (0 = top or left, 1 = bottom or right)."""
         width, height = image_size
         return cls(
