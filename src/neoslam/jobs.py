@@ -12,7 +12,7 @@ import numpy as np
 from tqdm import tqdm
 
 from neoslam.config import NOISE_PROFILES, NeoSLAMConfig
-from neoslam.datasets.kitti import is_kitti_root, read_kitti_sequence, sequences_in
+from neoslam.datasets.kitti import KittiSequence, is_kitti_root, read_kitti_sequence, sequences_in
 from neoslam.datasets.simulated import is_simulated_dataset, read_dataset, write_dataset
 from neoslam.errors import ConfigError, InputError
 from neoslam.evaluation.report import cell_metrics, loop_metrics, timing_metrics, trajectory_metrics
@@ -136,6 +136,14 @@ class ImageInputs:
     odometry: Path | None = None
 
 
+def _kitti_sequence(root: Path, name: str | None) -> KittiSequence:
+    """The named sequence of a KITTI root; without a name, one line listing the sequences there."""
+    if name is None:
+        found = ", ".join(sequences_in(root)) or "none"
+        raise InputError(root, f"a KITTI root needs --sequence NN (sequences here: {found})")
+    return read_kitti_sequence(root, name)
+
+
 def _load(data: Path, config: NeoSLAMConfig, inputs: ImageInputs) -> Dataset:
     if not data.exists():
         raise InputError(data, "dataset folder not found")
@@ -144,10 +152,7 @@ def _load(data: Path, config: NeoSLAMConfig, inputs: ImageInputs) -> Dataset:
             raise ConfigError("--sequence, --detections and --odometry apply to KITTI image sequences only")
         return read_dataset(data)
     if is_kitti_root(data):
-        if inputs.sequence is None:
-            found = ", ".join(sequences_in(data)) or "none"
-            raise InputError(data, f"a KITTI root needs --sequence NN (sequences here: {found})")
-        sequence = read_kitti_sequence(data, inputs.sequence)
+        sequence = _kitti_sequence(data, inputs.sequence)
         return open_front_end(sequence, config.perception, inputs.detections, inputs.odometry)
     raise InputError(data, "neither a simulated dataset (dataset.yaml) nor a KITTI odometry root (sequences/)")
 
@@ -273,10 +278,7 @@ def detect_sequence(
 
     if not is_kitti_root(root):
         raise InputError(root, "not a KITTI odometry root (sequences/NN/image_0, image_1, calib.txt, times.txt)")
-    if sequence_name is None:
-        found = ", ".join(sequences_in(root)) or "none"
-        raise InputError(root, f"a KITTI root needs --sequence NN (sequences here: {found})")
-    sequence = read_kitti_sequence(root, sequence_name)
+    sequence = _kitti_sequence(root, sequence_name)
     with atomic_file(out, overwrite) as staging:
         detector = make_detector(config.perception.detector)
         indices = tqdm(range(len(sequence)), desc="detect", unit="frame", disable=not progress, leave=False)

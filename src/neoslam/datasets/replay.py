@@ -95,9 +95,6 @@ class ReplayedSequence:
             return left, right
         return change.apply(left, index, 0), change.apply(right, index, 1)
 
-    def left_image(self, index: int) -> np.ndarray:
-        return self.stereo_pair(index)[0]
-
 
 def forward_back_forward(
     base: KittiSequence, third_pass: PhotometricChange, frames: Sequence[int] | None = None

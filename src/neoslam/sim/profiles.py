@@ -9,7 +9,7 @@ stereo) on the 51 real frames of KITTI 06 (`kitti_06_51`), with ground-truth pos
 The real front end places few objects: distant and off-axis cars are missed, cars cut by the image border are not
 placed, parked cars hide each other. The `real` values are the fit of that command (the figures it printed are in
 the comment above the profile); re-run it when the front end changes. Fitted on 51 frames of one straight street
-(18 labelled objects), so each value is rough: the table is coarse on purpose.
+(about 20 labelled objects), so each value is rough: the table is coarse on purpose.
 """
 
 from __future__ import annotations
