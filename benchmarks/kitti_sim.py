@@ -3,10 +3,12 @@
 For each sequence, odometry noise profile and seed: `neoslam simulate` on the real KITTI ground truth, then
 `neoslam run` with each back end, plus the pose graph without the paper's grid-cell check of loop candidates (to
 show what that check costs under heavy drift). Loop closures are judged within 5 m horizontally, 100 frames apart.
-Runs go two at a time (the machine has two cores); timing columns are per run.
+The runs are one sweep, `benchmarks/specs/kitti_sim.yaml` (`neoslam sweep`; the three back ends share each drive's
+simulation): on a local pool, one worker per core, or on a Ray cluster (`--ray ADDRESS`); `--out DIR` keeps the
+sweep folder, and running again resumes it. Timing columns are per run.
 
     python benchmarks/kitti_sim.py [--quick] [--json FILE] [--sequences 05 08] [--profiles vo] [--seeds 1 2 3]
-                                   [--detectors real ideal]
+                                   [--detectors real ideal] [--out DIR] [--workers N] [--ray ADDRESS]
 
 `--detectors`: the simulator's detection profiles (default: real, the street and detector calibrated to the real
 front end on KITTI 06; ideal, the richer street of the first benchmarks).
@@ -16,20 +18,18 @@ from __future__ import annotations
 
 import statistics
 import sys
-import tempfile
-from multiprocessing import Pool
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from neoslam.config import load_config  # noqa: E402
-from neoslam.jobs import record, run_dataset, simulate_dataset, simulation_config, with_backend  # noqa: E402
+from _sweep import SPECS, run_spec, sweep_options, with_changes  # noqa: E402
 from neoslam.sim.profiles import DETECTION_PROFILES  # noqa: E402
+from neoslam.sweep import load_spec  # noqa: E402
 
 SEQUENCES = ["00", "02", "05", "06", "07", "08"]
 PROFILES = ["vo", "heavy"]
 SEEDS = [1, 2, 3]
-NO_CELL_CHECK = 1e9  # a grid-cell distance threshold that accepts every candidate
+SPEC = SPECS / "kitti_sim.yaml"  # overrides relaxation, pose_graph, pose_graph_no_cell_check
 
 
 def _arguments(parser) -> None:
@@ -37,25 +37,27 @@ def _arguments(parser) -> None:
     parser.add_argument("--profiles", nargs="+", default=PROFILES)
     parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
     parser.add_argument("--detectors", nargs="+", default=["real"], choices=sorted(DETECTION_PROFILES))
+    sweep_options(parser)
 
 
-def _without_cell_check(config):
-    experience_map = config.experience_map.model_copy(update={"gc_distance_threshold": NO_CELL_CHECK})
-    return config.model_copy(update={"experience_map": experience_map})
+def _drives(records) -> tuple[list[dict], list[str]]:
+    """The sweep's cells gathered per drive (sequence, detector, profile, seed): a row of the three back ends;
+    a drive with a failed cell is left out and its errors returned."""
+    drives: dict[tuple, dict] = {}
+    errors = []
+    for record in records:
+        cell = record.cell
+        drives.setdefault((cell.source, cell.detector, cell.noise, cell.seed), {})[cell.override] = record.metrics
+        if record.status != "ok":
+            errors.append(
+                f"{cell.source} {cell.detector} {cell.noise} seed {cell.seed} {cell.override}: {record.error}"
+            )
+    rows = [row(*key, metrics) for key, metrics in drives.items() if all(m is not None for m in metrics.values())]
+    return rows, errors
 
 
-def measure(job: tuple[str, str, str, int]) -> dict:
-    sequence, detector, profile, seed = job
-    config = simulation_config(load_config(environ={}), profile, seed, detector)
-    with tempfile.TemporaryDirectory() as tmp:
-        data = Path(tmp) / "data"
-        simulate_dataset(data, record(config, trajectory=data_root() / "kitti" / "poses" / f"{sequence}.txt"))
-        variants = {
-            "relaxation": with_backend(config, "relaxation"),
-            "pose_graph": with_backend(config, "pose-graph"),
-            "pose_graph_no_cell_check": _without_cell_check(with_backend(config, "pose-graph")),
-        }
-        metrics = {name: run_dataset(data, Path(tmp) / name, c, progress=False) for name, c in variants.items()}
+def row(sequence: str, detector: str, profile: str, seed: int, metrics: dict[str, dict]) -> dict:
+    """One drive's figures from the metrics of its three runs."""
     graph = metrics["pose_graph"]
     return {
         "sequence": sequence,
@@ -99,9 +101,21 @@ def _medians(rows: list[dict], keys: list[str]) -> list[dict]:
 def main() -> None:
     args = parse_args(__doc__.splitlines()[0], _arguments)
     sequences, seeds = (["05"], args.seeds[:1]) if args.quick else (args.sequences, args.seeds)
-    jobs = [(s, d, p, seed) for s in sequences for d in args.detectors for p in args.profiles for seed in seeds]
-    with Pool(2) as pool:
-        rows = pool.map(measure, jobs, chunksize=1)
+    spec = with_changes(
+        load_spec(SPEC),
+        sources=[{"kitti": sequences}],
+        noise=args.profiles,
+        detectors=args.detectors,
+        seeds=seeds,
+        data_root=data_root(),
+    )
+    with run_spec(spec, args) as sweep:
+        rows, errors = _drives(sweep.records)
+        summary = sweep.summary
+    order = {"sequence": sequences, "detector": args.detectors, "profile": args.profiles}
+    rows.sort(key=lambda r: (*(order[k].index(r[k]) for k in order), r["seed"]))
+    if errors:
+        print("Failed runs (left out):\n\n" + "\n".join(f"- {e}" for e in errors) + "\n")
     columns = ["sequence", "detector", "profile", "seed", "frames", "ate_odometry_m", "ate_relaxation_m",
                "ate_pose_graph_m", "ate_pose_graph_no_cell_check_m", "loops_accepted", "loops_false", "loop_precision",
                "loop_recall", "rejected_by_cells", "loops_false_no_cell_check", "fps", "ms_per_frame_median",
@@ -113,6 +127,7 @@ def main() -> None:
     medians = _medians(rows, keys)
     print("\nMedian over seeds:\n")
     print(markdown_table(medians, ["sequence", "detector", "profile", "seeds", *keys]))
+    print("\n" + summary.replace("# Sweep", "Sweep", 1))
     write_json(args.json, {"rows": rows, "medians": medians})
 
 

@@ -15,7 +15,11 @@
     the largest map also with the exact eigenvector (power iteration run to 1e-9, at most 100 products).
 
     python benchmarks/loops.py [--quick] [--seeds N ...] [--sequences 08 town ...] [--profile vo|heavy]
-                               [--config FILE.yaml] [--json FILE]
+                               [--config FILE.yaml] [--json FILE] [--out DIR] [--workers N] [--ray ADDRESS]
+
+The drives of (a) are one sweep, `benchmarks/specs/loops.yaml` (`neoslam sweep`, with this file's `measure` as each
+cell's measurement): on a local pool, one worker per core, or Ray tasks (`--ray`: the workers need this folder on
+their PYTHONPATH); `--out DIR` keeps the sweep folder, and running again resumes it.
 
 Seeds 1-10 were looked at while the verification was designed (the contradiction and heading-drift checks);
 seeds 11 and up were not: `--seeds 11 12 13 14 15 16` measures on drives held out from that design.
@@ -23,9 +27,9 @@ seeds 11 and up were not: `--seeds 11 12 13 14 15 16` measures on drives held ou
 
 from __future__ import annotations
 
+import pickle
 import statistics
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -35,14 +39,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
 from _loop_misses import CLASSES as MISS_CLASSES  # noqa: E402
 from _loop_misses import classify_misses  # noqa: E402
+from _sweep import SPECS, run_spec, sweep_options, with_changes  # noqa: E402
 from neoslam.config import MatchingConfig, NeoSLAMConfig, load_config  # noqa: E402
 from neoslam.datasets.simulated import read_dataset  # noqa: E402
 from neoslam.evaluation.loops import LoopCriteria, evaluate_closures, judge_closures  # noqa: E402
 from neoslam.geometry import invert_pose, rotation_angle  # noqa: E402
-from neoslam.jobs import record, simulate_dataset, simulation_config  # noqa: E402
 from neoslam.loop.detector import LoopClosureDetector  # noqa: E402
 from neoslam.loop.matching import contradictions  # noqa: E402
 from neoslam.pipeline import NeoSLAM  # noqa: E402
+from neoslam.sweep import load_spec  # noqa: E402
 from neoslam.types import Keyframe  # noqa: E402
 
 SEQUENCES = ["00", "02", "05", "06", "08"]
@@ -51,20 +56,23 @@ MAP_SIZES = [100, 500, 1000, 2000, 5000]
 QUICK_MAP_SIZES = [100, 1000, 5000]
 QUERIES = 200
 TILE_OFFSET_M = 1500.0  # copies of the KITTI 00 keyframes are laid this far apart
-PAPER_KEYFRAMES = {  # paper 3.2: "all objects within e_max = 1.5 m", never grown on a sparse street
-    "neighbourhood_radius": 1.5,
-    "min_objects": 1,
-    "sparse_objects": 1,
-}
-WITHOUT_LAST_CHECKS = {"max_contradictions": 10**6, "max_yaw_drift_deg": 360.0}
+SPEC = SPECS / "loops.yaml"  # overrides: ours, paper_keyframes (e_max = 1.5 m), without_last_checks
+VARIANTS = ("ours", "paper_keyframes", "without_last_checks")
 EXACT_EIGENVECTOR = {"power_iterations": 100, "power_tolerance": 1e-9}  # the power iteration run to convergence
+
+
+def _every_keyframe_stored(config: NeoSLAMConfig) -> NeoSLAMConfig:
+    """The detector is judged on every keyframe: none is merged into a stored one it recognises (lifelong mapping,
+    experience_map.reuse_places), so that each is queried, stored and classified here, whatever it matched."""
+    experience_map = config.experience_map.model_copy(update={"reuse_places": False})
+    return config.model_copy(update={"experience_map": experience_map})
 
 
 def _drive(config: NeoSLAMConfig, data: Path) -> tuple[NeoSLAM, np.ndarray, list[float], set[int]]:
     """Run the pipeline on a dataset; returns it, the true poses, the wall time of each loop query and the ids of
     the keyframes the detector relocalised."""
     dataset = read_dataset(data)
-    slam = NeoSLAM(config)
+    slam = NeoSLAM(_every_keyframe_stored(config))
     detector = slam.loop_detector
     detector_query, detector_relocalise = detector.query, detector.relocalise
     query_times: list[float] = []
@@ -95,26 +103,17 @@ def _judge(slam: NeoSLAM, truth: np.ndarray, horizontal: bool) -> dict:
     return evaluate_closures(slam.detected_closures, positions, LoopCriteria(), frames).as_dict()
 
 
-def accuracy(
-    base: NeoSLAMConfig,
-    name: str,
-    trajectory: Path | None,
-    profile: str,
-    seed: int,
-    workdir: Path,
-    detector: str = "real",
-) -> tuple[dict, dict, dict]:
-    """The drive with our keyframe setting, with the paper's, and with ours without the last two checks."""
-    config = simulation_config(base, profile, seed, detector)
-    recording = record(config, trajectory=trajectory, fmt="kitti") if trajectory else record(config, route=name)
-    simulate_dataset(workdir / "data", recording, overwrite=True)
-    paper = config.model_copy(update={"keyframes": config.keyframes.model_copy(update=PAPER_KEYFRAMES)})
-    unchecked = config.model_copy(update={"matching": config.matching.model_copy(update=WITHOUT_LAST_CHECKS)})
-    return (
-        _accuracy_of(name, seed, config, workdir / "data"),
-        _accuracy_of(name, seed, paper, workdir / "data"),
-        _accuracy_of(name, seed, unchecked, workdir / "data"),
-    )
+def measure(data: Path, config: NeoSLAMConfig, out: Path, inputs=None) -> dict:
+    """A sweep cell: the drive through the pipeline, its closures judged and its misses sorted (JSON); its keyframes
+    go to out/keyframes.pkl (kept with the cell), for the query-speed part."""
+    result = _accuracy_of(config, data)
+    out.mkdir()
+    with (out / "keyframes.pkl").open("wb") as handle:
+        pickle.dump(result.pop("_keyframes"), handle)
+    del result["_odometer"]
+    result["_misses"] = dict(result["_misses"])
+    result["timing"] = {"query_ms_median": result.pop("query_ms_median")}  # the machine's: kept out of sweep.csv
+    return result
 
 
 def _closure_evidence(slam: NeoSLAM, truth: np.ndarray) -> list[dict]:
@@ -138,14 +137,12 @@ def _closure_evidence(slam: NeoSLAM, truth: np.ndarray) -> list[dict]:
     return evidence
 
 
-def _accuracy_of(name: str, seed: int, config: NeoSLAMConfig, data: Path) -> dict:
+def _accuracy_of(config: NeoSLAMConfig, data: Path) -> dict:
     slam, poses, query_times, relocalised = _drive(config, data)
     truth = poses[:, :3, 3]
     flat, full = _judge(slam, truth, horizontal=True), _judge(slam, truth, horizontal=False)
     keyframes = slam.loop_detector.index.keyframes
     return {
-        "sequence": name,
-        "seed": seed,
         "neighbourhood_m": config.keyframes.neighbourhood_radius,
         "keyframes": len(keyframes),
         "max_objects": max((len(k.labels) for k in keyframes), default=0),
@@ -225,11 +222,6 @@ def query_speed(keyframes: list[Keyframe], sizes: list[int], queries: int) -> li
     return [*rows, {"eigenvector": "exact", **_speed_row(exact, stream, max(sizes), queries)}]
 
 
-def _drives(names: list[str]) -> list[tuple[str, Path | None]]:
-    """(name, KITTI pose file) of each drive; the town route is built in (no file)."""
-    return [(n, None if n == "town" else data_root() / "kitti" / "poses" / f"{n}.txt") for n in names]
-
-
 def _paper_note(paper: list[dict], config: NeoSLAMConfig) -> str:
     """What limits the paper's keyframes, from the keyframes the runs made."""
     largest = max((r["max_objects"] for r in paper), default=0)
@@ -291,6 +283,7 @@ def _options(parser) -> None:
     )
     parser.add_argument("--sequences", nargs="+", help=f"drives (default {' '.join(SEQUENCES)} town)")
     parser.add_argument("--config", type=Path, help="a NeoSLAM config file (YAML) instead of the defaults")
+    sweep_options(parser)
 
 
 def misses_table(runs: list[dict]) -> list[dict]:
@@ -307,17 +300,36 @@ def main() -> None:
     sequences = args.sequences or (["05", "08", "town"] if args.quick else [*SEQUENCES, "town"])
     base = load_config(args.config, environ={})
     seeds = args.seeds or (SEEDS[:1] if args.quick else SEEDS)
-    runs, paper, unchecked = [], [], []
-    with tempfile.TemporaryDirectory() as tmp:
-        for sequence, trajectory in _drives(sequences):
-            for seed in seeds:
-                ours, papers, without = accuracy(
-                    base, sequence, trajectory, args.profile, seed, Path(tmp), args.detector
-                )
-                runs.append(ours)
-                paper.append(papers)
-                unchecked.append(without)
-        keyframes_00 = next((r["_keyframes"] for r in runs if r["sequence"] == "00"), runs[0]["_keyframes"])
+    changes = {"config": args.config.resolve()} if args.config is not None else {}
+    spec = with_changes(
+        load_spec(SPEC),
+        sources=[{"route": n} if n == "town" else {"kitti": n} for n in sequences],
+        noise=[args.profile],
+        detectors=[args.detector],
+        seeds=seeds,
+        keep_results=True,  # each cell's keyframes.pkl
+        metrics=["keyframes", "accepted", "false_positive", "precision", "recall"],  # what `measure` returns
+        data_root=data_root(),
+        **changes,
+    )
+    variants: dict[str, list[dict]] = {name: [] for name in VARIANTS}
+    with run_spec(spec, args, measure=measure) as sweep:
+        for record in sweep.failed:
+            cell = record.cell
+            print(f"- failed: {cell.source} seed {cell.seed} {cell.override}: {record.error}")
+        for record in sweep.records:
+            if record.status == "ok":
+                metrics = dict(record.metrics)
+                metrics["query_ms_median"] = metrics.pop("timing")["query_ms_median"]
+                drive = {"sequence": record.cell.source, "seed": record.cell.seed, "_folder": record.folder}
+                variants[record.cell.override].append(drive | metrics)
+        runs, paper, unchecked = (variants[name] for name in VARIANTS)
+        if not (runs and paper and unchecked):
+            sys.exit("loops.py: a variant has no drive that ran (the errors above; tracebacks in the cells' error.txt)")
+        first = next((r for r in runs if r["sequence"] == "00"), runs[0])
+        with (first["_folder"] / "results" / "keyframes.pkl").open("rb") as handle:
+            keyframes_00 = pickle.load(handle)
+        sweep_summary = sweep.summary
     sizes = QUICK_MAP_SIZES if args.quick else MAP_SIZES
     speed = query_speed(keyframes_00, sizes, QUERIES // 4 if args.quick else QUERIES)
     columns = ["sequence", "seed", "keyframes", "revisit_keyframes", "accepted", "false_positive", "precision",
@@ -360,6 +372,7 @@ def main() -> None:
         f"\nAt {largest['map_size']} keyframes: median {largest['query_ms_median']:.2f} ms, new places "
         f"{largest['new_place_ms_median']:.2f} ms, revisits {largest['revisit_ms_median']:.2f} ms."
     )
+    print("\n" + sweep_summary.replace("# Sweep", "Sweep", 1))
     write_json(
         args.json,
         {

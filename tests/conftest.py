@@ -3,8 +3,10 @@ repository root) and skip when it is absent, unless NEOSLAM_REQUIRE_DATA=1 (CI),
 
 from __future__ import annotations
 
+import importlib
 import os
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
@@ -35,3 +37,21 @@ def kitti_poses(shared_data: Path):
         return shared_data / "kitti" / "poses" / f"{sequence}.txt"
 
     return _path
+
+
+def require_extra(module: str, extra: str) -> ModuleType:
+    """Import an optional extra's module, or skip with the command that installs it; under NEOSLAM_REQUIRE_EXTRAS=1
+    (CI, which installs the extras) a missing extra fails instead."""
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        reason = f'{module} is not installed: it is the optional extra pip install "neoslam[{extra}]"'
+        if os.environ.get("NEOSLAM_REQUIRE_EXTRAS") == "1":
+            pytest.fail(reason)
+        pytest.skip(reason)
+
+
+@pytest.fixture(scope="session")
+def extra():
+    """`extra("rerun", "viewer")`: the module of an optional extra (see `require_extra`)."""
+    return require_extra

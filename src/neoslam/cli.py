@@ -2,17 +2,41 @@
 
 from __future__ import annotations
 
+import os
+import signal
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from typer.core import TyperGroup
 
 from neoslam import __version__
 from neoslam.config import NOISE_PROFILES, dump_config, load_config
 from neoslam.errors import ConfigError, NeoSLAMError
 
+RERUN_OPTION = "--rerun"
+RERUN_SPAWN = "spawn"  # neoslam.viz.rerun_view.SPAWN, without importing it at start-up
+
+
+class _Commands(TyperGroup):
+    """`--rerun` takes an optional value: alone it spawns the viewer, followed by a FILE.rrd it records there.
+    Click options cannot make their value optional, so a bare `--rerun` is given the value "spawn" here; a value is
+    taken only when it ends in .rrd, so that `run --rerun DATA` never reads DATA as the recording file."""
+
+    def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
+        given = []
+        for index, arg in enumerate(args):
+            given.append(arg)
+            if arg == RERUN_OPTION and (index + 1 == len(args) or not args[index + 1].endswith(".rrd")):
+                given.append(RERUN_SPAWN)
+        return super().parse_args(ctx, given)
+
+
 app = typer.Typer(
+    cls=_Commands,
     name="neoslam",
     help="Neural Object SLAM: object SLAM with grid cells, head-direction cells and object-vector cells.",
     no_args_is_help=True,
@@ -24,6 +48,10 @@ ConfigOption = Annotated[Path | None, typer.Option("--config", "-c", help="YAML 
 OutOption = Annotated[Path, typer.Option("--out", "-o", help="Output folder (written whole or not at all).")]
 OverwriteOption = Annotated[bool, typer.Option("--overwrite", help="Replace a non-empty output folder.")]
 QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")]
+LeftTopicOption = Annotated[
+    str | None, typer.Option(help="A bag's left camera topic (Image or CompressedImage); found when unambiguous.")
+]
+RightTopicOption = Annotated[str | None, typer.Option(help="A bag's right camera topic; found when unambiguous.")]
 
 
 def _fail(error: NeoSLAMError | OSError) -> None:
@@ -33,6 +61,42 @@ def _fail(error: NeoSLAMError | OSError) -> None:
     raise typer.Exit(code=2)
 
 
+class _Terminated(BaseException):
+    """Ctrl-C, SIGTERM or SIGHUP, raised where the command is so that the output it was writing is removed on the
+    way out (not a KeyboardInterrupt: click would turn that into "Aborted!" and exit code 1)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+@contextmanager
+def _stops_cleanly() -> Iterator[None]:
+    """Ctrl-C, SIGTERM and SIGHUP stop a command alike: the output it was writing vanishes, one line, exit 128+N."""
+
+    def terminate(signum: int, _frame: object) -> None:
+        raise _Terminated(signum)
+
+    previous = {s: signal.signal(s, terminate) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    except _Terminated as stop:
+        why = "interrupted" if stop.signum == signal.SIGINT else f"stopped by {signal.Signals(stop.signum).name}"
+        _exit_now(why, stop.signum)
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+
+
+def _exit_now(why: str, signum: int) -> None:
+    """Exit at once once the output being written is gone: the interpreter's own shutdown (torch, onnxruntime,
+    OpenCV) takes over a second, and a user who stops a run wants the prompt back now."""
+    typer.echo(f"neoslam: {why}; no output written", err=True)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(128 + signum)
+
+
 def _version(value: bool) -> None:
     if value:
         typer.echo(f"neoslam {__version__}")
@@ -40,7 +104,7 @@ def _version(value: bool) -> None:
 
 
 @app.callback()
-def main(
+def root(
     version: Annotated[
         bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and exit.")
     ] = False,
@@ -77,9 +141,10 @@ def simulate(
         if trajectory is not None and route is not None:
             raise ConfigError("give either --trajectory or --route, not both")
         settings = simulation_config(load_config(config), noise, seed, detector)
-        check_target(out, overwrite)
+        read = [trajectory, times, config]
+        check_target(out, overwrite, read)
         recording = record(settings, trajectory, fmt, times, route, progress=not quiet)
-        simulate_dataset(out, recording, overwrite)
+        simulate_dataset(out, recording, overwrite, read)
     except (NeoSLAMError, OSError) as error:
         _fail(error)
     detections = sum(len(d) for d in recording.detections)
@@ -88,7 +153,9 @@ def simulate(
 
 @app.command("run")
 def run_command(
-    data: Annotated[Path | None, typer.Argument(help="Dataset folder; none runs the default scenario.")] = None,
+    data: Annotated[
+        Path | None, typer.Argument(help="Dataset folder, KITTI root or ROS bag; none runs the default scenario.")
+    ] = None,
     out: OutOption = Path("results"),
     sequence: Annotated[str | None, typer.Option(help="KITTI sequence under a KITTI odometry root, e.g. 06.")] = None,
     detections: Annotated[
@@ -98,19 +165,36 @@ def run_command(
     odometry: Annotated[
         Path | None, typer.Option(help="Odometry poses (TUM or KITTI, one per image) instead of stereo odometry.")
     ] = None,
+    left_topic: LeftTopicOption = None,
+    right_topic: RightTopicOption = None,
+    odometry_topic: Annotated[
+        str | None, typer.Option(help="A bag's nav_msgs/Odometry topic as the motion instead of stereo odometry.")
+    ] = None,
     backend: Annotated[str | None, typer.Option(help="Map correction: relaxation or pose-graph.")] = None,
+    rerun: Annotated[
+        str | None,
+        typer.Option(
+            RERUN_OPTION,
+            metavar="[FILE.rrd]",
+            # The backslash keeps rich from reading [viewer] as markup.
+            help="Show the run live in Rerun: alone, spawn the viewer; with FILE.rrd, record there "
+            '(needs pip install "neoslam\\[viewer]").',
+        ),
+    ] = None,
     config: ConfigOption = None,
     overwrite: OverwriteOption = False,
     quiet: QuietOption = False,
 ) -> None:
-    """Run NeoSLAM on a simulated dataset or a KITTI image sequence and write the results folder (trajectories,
-    object map, metrics, plots)."""
+    """Run NeoSLAM on a simulated dataset, a KITTI image sequence or a ROS 1 / ROS 2 bag and write the results
+    folder (trajectories, object map, pose graph, metrics, plots)."""
     from neoslam.jobs import ImageInputs, run_dataset, with_backend
 
     try:
         settings = with_backend(load_config(config), backend)
-        inputs = ImageInputs(sequence, detections, odometry)
-        metrics = run_dataset(data, out, settings, overwrite, progress=not quiet, inputs=inputs)
+        inputs = ImageInputs(sequence, detections, odometry, left_topic, right_topic, odometry_topic)
+        metrics = run_dataset(
+            data, out, settings, overwrite, progress=not quiet, inputs=inputs, read=[config], rerun=rerun
+        )
     except (NeoSLAMError, OSError) as error:
         _fail(error)
     rows: list[tuple[str, Any]] = [("results", out), ("frames", metrics["frames"])]
@@ -125,19 +209,25 @@ def run_command(
 
 @app.command()
 def detect(
-    data: Annotated[Path, typer.Argument(help="KITTI odometry root (sequences/NN/image_0 ...).")],
+    data: Annotated[Path, typer.Argument(help="KITTI odometry root (sequences/NN/image_0 ...) or ROS bag.")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Detections file to write (JSON lines).")],
     sequence: Annotated[str | None, typer.Option(help="KITTI sequence under the root, e.g. 06.")] = None,
+    left_topic: LeftTopicOption = None,
+    right_topic: RightTopicOption = None,
     config: ConfigOption = None,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an existing file.")] = False,
     quiet: QuietOption = False,
 ) -> None:
     """Run the configured detector over a sequence's left images and write the detections in the JSON-lines
     format that `neoslam run --detections` reads."""
-    from neoslam.jobs import detect_sequence
+    from neoslam.jobs import ImageInputs, detect_sequence
 
     try:
-        counts = detect_sequence(data, sequence, out, load_config(config), overwrite, progress=not quiet)
+        settings = load_config(config)
+        topics = ImageInputs(left_topic=left_topic, right_topic=right_topic)
+        counts = detect_sequence(
+            data, sequence, out, settings, overwrite, progress=not quiet, read=[config], topics=topics
+        )
     except (NeoSLAMError, OSError) as error:
         _fail(error)
     typer.echo(f"wrote {out}: {counts['detections']} detections in {counts['frames']} frames")
@@ -155,7 +245,6 @@ def evaluate(
     config: ConfigOption = None,
 ) -> None:
     """ATE, RPE and KITTI drift of a trajectory file against ground truth; loop precision and recall."""
-    from neoslam.io.results import write_metrics
     from neoslam.jobs import evaluate_files
 
     try:
@@ -165,9 +254,7 @@ def evaluate(
                 raise ConfigError(f"--align must be se3, sim3 or none, not {align!r}")
             evaluation = settings.evaluation.model_copy(update={"alignment": align})
             settings = settings.model_copy(update={"evaluation": evaluation})
-        metrics = evaluate_files(estimate, groundtruth, settings, est_format, gt_format, loops)
-        if json_out is not None:
-            write_metrics(json_out, metrics)
+        metrics = evaluate_files(estimate, groundtruth, settings, est_format, gt_format, loops, json_out, [config])
     except (NeoSLAMError, OSError) as error:
         _fail(error)
     rows = [(key, value) for key, value in metrics.items() if not isinstance(value, dict)]
@@ -184,5 +271,62 @@ def dump_config_command(config: ConfigOption = None) -> None:
         _fail(error)
 
 
+@app.command()
+def sweep(
+    spec: Annotated[Path, typer.Argument(help="Sweep spec (YAML): sources, noise, detectors, seeds, overrides.")],
+    out: Annotated[
+        Path, typer.Option("--out", "-o", help="Sweep folder: new, or this sweep's (resumed: done cells are kept).")
+    ],
+    ray: Annotated[
+        str | None,
+        typer.Option(
+            "--ray",
+            envvar="RAY_ADDRESS",
+            help='Run the cells as Ray tasks on this cluster ("auto", "ray://HOST:10001"); needs neoslam[cluster].',
+        ),
+    ] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option(
+            help="Local worker processes (default: one per core; 0: in this process); with --ray, the most "
+            "tasks at once."
+        ),
+    ] = None,
+    quiet: QuietOption = False,
+) -> None:
+    """Run a grid of drives x noise x detection profiles x seeds x config overrides, each cell evaluated and kept,
+    into one table (sweep.csv, sweep.parquet) and a summary (summary.md). Rerun to resume."""
+    from neoslam.sweep import load_spec, make_executor, run_sweep
+
+    try:
+        loaded = load_spec(spec)
+        result = run_sweep(loaded, out, make_executor(ray, workers), progress=not quiet, read=[spec])
+    except (NeoSLAMError, OSError) as error:
+        _fail(error)
+    except _Terminated as stop:
+        why = "interrupted" if stop.signum == signal.SIGINT else f"stopped by {signal.Signals(stop.signum).name}"
+        typer.echo(f"neoslam: {why}; the finished cells are kept in {out}/cells: run the same command to resume",
+                   err=True)  # fmt: skip
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(128 + stop.signum)
+    typer.echo(result.summary)
+    failed = len({r.cell.id for r in result.failed})
+    typer.echo(
+        f"wrote {out}: {len(result.records)} cells ({result.ran} run, {result.reused} reused, {failed} failed) "
+        f"in {result.wall_s:.1f} s; table {result.paths['csv'].name}, {result.paths['parquet'].name}"
+    )
+    if failed:
+        typer.echo(f"neoslam: {failed} cells failed (their errors: the error column of {result.paths['csv']})",
+                   err=True)  # fmt: skip
+        raise typer.Exit(code=1)
+
+
+def entry() -> None:
+    """The `neoslam` console script: the app, stopped cleanly by Ctrl-C, SIGTERM and SIGHUP at any point."""
+    with _stops_cleanly():
+        app()
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(app())
+    entry()

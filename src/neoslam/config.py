@@ -7,16 +7,19 @@ Precedence, lowest first: defaults < YAML file (`--config`) < environment variab
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from neoslam.errors import ConfigError, InputError
+from neoslam.io.text import read_text
 from neoslam.perception.config import PerceptionConfig
 
 __all__ = [
+    "merge_settings",
     "CameraConfig",
     "WorldConfig",
     "DetectionNoiseConfig",
@@ -32,10 +35,12 @@ __all__ = [
     "ExperienceMapConfig",
     "ObjectMapConfig",
     "EvaluationConfig",
+    "MotionLimitsConfig",
     "PerceptionConfig",
     "NeoSLAMConfig",
     "load_config",
     "dump_config",
+    "describe_validation_error",
     "ENV_PREFIX",
 ]
 
@@ -44,42 +49,48 @@ ENV_NESTED_DELIMITER = "__"
 
 
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # allow_inf_nan=False: .inf or .nan in a YAML file or a NEOSLAM_* variable is refused with the field's name
+    # (an infinite spacing or cell size validates as "> 0" and then breaks a run far from its cause).
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class CameraConfig(_Section):
     """Rectified stereo camera; defaults are KITTI odometry sequences 04-12 (left grey camera)."""
 
-    fx: float = Field(707.0912, gt=0, description="focal length, px")
-    fy: float = Field(707.0912, gt=0, description="focal length, px")
-    cx: float = Field(601.8873, description="principal point x, px")
-    cy: float = Field(183.1104, description="principal point y, px")
-    width: int = Field(1226, gt=0, description="image width, px")
-    height: int = Field(370, gt=0, description="image height, px")
-    baseline: float = Field(0.5372, gt=0, description="stereo baseline, m (379.8145 / fx)")
-    height_above_ground: float = Field(1.65, gt=0, description="camera height above the road, m (KITTI)")
-    max_range: float = Field(40.0, gt=0, description="detections beyond this depth are not reported, m")
-    min_range: float = Field(1.0, gt=0, description="closer objects fill the view and are not reported, m")
+    fx: float = Field(707.0912, gt=0, le=1e5, description="focal length, px")
+    fy: float = Field(707.0912, gt=0, le=1e5, description="focal length, px")
+    cx: float = Field(601.8873, ge=-1e5, le=1e5, description="principal point x, px")
+    cy: float = Field(183.1104, ge=-1e5, le=1e5, description="principal point y, px")
+    width: int = Field(1226, gt=0, le=100_000, description="image width, px")
+    height: int = Field(370, gt=0, le=100_000, description="image height, px")
+    baseline: float = Field(0.5372, gt=0, le=100, description="stereo baseline, m (379.8145 / fx)")
+    height_above_ground: float = Field(1.65, gt=0, le=100, description="camera height above the road, m (KITTI)")
+    max_range: float = Field(40.0, gt=0, le=1e4, description="detections beyond this depth are not reported, m")
+    min_range: float = Field(1.0, gt=0, le=1e4, description="closer objects fill the view and are not reported, m")
 
 
 class WorldConfig(_Section):
     """Static objects placed along a route the way a street holds them."""
 
-    spacing: float = Field(7.0, gt=0, description="mean gap between candidate object slots along the road, m")
-    occupancy: float = Field(0.55, ge=0, le=1, description="share of slots (each side) that hold an object")
-    lateral_offset: float = Field(5.0, gt=0, description="distance of parked objects from the route centre, m")
-    lateral_jitter: float = Field(0.6, ge=0, description="std of the lateral placement, m")
-    min_separation: float = Field(3.0, gt=0, description="no two objects closer than this, m")
-    road_clearance: float = Field(
-        3.0, gt=0, description="no object centre is placed closer than this to any part of the route, m"
+    spacing: float = Field(
+        7.0, ge=0.5, le=1000, description="mean gap between candidate object slots along the road, m"
     )
-    revisit_radius: float = Field(8.0, gt=0, description="route points this close to an earlier pass place nothing")
+    occupancy: float = Field(0.55, ge=0, le=1, description="share of slots (each side) that hold an object")
+    lateral_offset: float = Field(5.0, gt=0, le=1000, description="distance of parked objects from the route centre, m")
+    lateral_jitter: float = Field(0.6, ge=0, le=100, description="std of the lateral placement, m")
+    min_separation: float = Field(3.0, ge=0.1, le=1000, description="no two objects closer than this, m")
+    road_clearance: float = Field(
+        3.0, gt=0, le=1000, description="no object centre is placed closer than this to any part of the route, m"
+    )
+    revisit_radius: float = Field(
+        8.0, gt=0, le=1000, description="route points this close to an earlier pass place nothing"
+    )
     class_mix: dict[str, float] = Field(
         default_factory=lambda: {"car": 0.70, "truck": 0.08, "bicycle": 0.10, "person": 0.12},
         description="relative frequency of each class",
     )
     moving_fraction: float = Field(0.0, ge=0, le=1, description="share of objects that move along the road")
-    moving_speed: float = Field(1.5, ge=0, description="speed of moving objects, m/s")
+    moving_speed: float = Field(1.5, ge=0, le=100, description="speed of moving objects, m/s")
     rows: tuple[tuple[float, float, float], ...] | None = Field(
         None,
         description="rows of objects instead of both sides at lateral_offset with occupancy and lateral_jitter: "
@@ -90,12 +101,20 @@ class WorldConfig(_Section):
     @model_validator(mode="after")
     def _rows_fit_the_slots(self) -> WorldConfig:
         for offset, density, jitter in self.rows or ():
-            if offset == 0 or jitter < 0 or not 0 <= density * self.spacing / 100.0 <= 1:
+            if not 0 < abs(offset) <= 1000 or not 0 <= jitter <= 100 or not 0 <= density * self.spacing / 100.0 <= 1:
                 raise ValueError(
-                    f"row ({offset}, {density}, {jitter}): needs a non-zero offset, 0 to {100.0 / self.spacing:.3g} "
-                    f"objects per 100 m (one slot every spacing = {self.spacing} m) and a jitter >= 0"
+                    f"row ({offset}, {density}, {jitter}): needs a non-zero offset up to 1000 m, 0 to "
+                    f"{100.0 / self.spacing:.3g} objects per 100 m (one slot every spacing = {self.spacing} m) and a "
+                    "jitter of 0 to 100 m"
                 )
         return self
+
+    @field_validator("class_mix")
+    @classmethod
+    def _mix_of_classes(cls, mix: dict[str, float]) -> dict[str, float]:
+        if not mix or any(not label.strip() or share < 0 for label, share in mix.items()) or sum(mix.values()) <= 0:
+            raise ValueError(f"needs class names with shares >= 0 that add up to more than 0, got {mix}")
+        return mix
 
 
 def _check_table(table: tuple[tuple[float, float], ...] | None, upper: float | None) -> None:
@@ -115,16 +134,18 @@ class DetectionNoiseConfig(_Section):
     miss_rate: float = Field(0.1, ge=0, le=1, description="probability to miss a visible object, at zero range")
     miss_rate_at_max_range: float = Field(0.4, ge=0, le=1, description="miss probability at max_range")
     label_confusion: float = Field(0.02, ge=0, le=1, description="probability to report another class")
-    false_positives_per_frame: float = Field(0.2, ge=0, description="Poisson mean of spurious detections")
-    pixel_sigma: float = Field(1.0, ge=0, description="std of the detected centre in the image, px")
-    disparity_sigma: float = Field(0.3, ge=0, description="std of the object disparity, px (depth error ~ z^2)")
+    false_positives_per_frame: float = Field(0.2, ge=0, le=100, description="Poisson mean of spurious detections")
+    pixel_sigma: float = Field(1.0, ge=0, le=1000, description="std of the detected centre in the image, px")
+    disparity_sigma: float = Field(
+        0.3, ge=0, le=1000, description="std of the object disparity, px (depth error ~ z^2)"
+    )
     surface_bias: float = Field(
         1.0, ge=0, le=1, description="share of the half-extent by which the stereo centre sits on the near surface"
     )
-    box_sigma: float = Field(2.0, ge=0, description="std of each box edge, px")
-    patch_size: int = Field(16, gt=1, description="side of the grey appearance patch, px")
-    patch_noise: float = Field(10.0, ge=0, description="std of per-observation patch noise, grey levels")
-    patch_gain_sigma: float = Field(0.08, ge=0, description="std of the per-observation brightness gain")
+    box_sigma: float = Field(2.0, ge=0, le=1000, description="std of each box edge, px")
+    patch_size: int = Field(16, gt=1, le=256, description="side of the grey appearance patch, px")
+    patch_noise: float = Field(10.0, ge=0, le=1000, description="std of per-observation patch noise, grey levels")
+    patch_gain_sigma: float = Field(0.08, ge=0, le=10, description="std of the per-observation brightness gain")
     texture_individuality: float = Field(
         0.5, ge=0, le=1, description="0: all objects of a class look alike, 1: every object looks unique"
     )
@@ -141,6 +162,7 @@ class DetectionNoiseConfig(_Section):
     border_margin: float | None = Field(
         None,
         ge=0,
+        le=1e4,
         description="an object whose box comes this close to the image border (or reaches behind the camera) is cut "
         "off and not placed, px, as the real stereo step does (perception.stereo.border_margin); None: placed",
     )
@@ -154,6 +176,7 @@ class DetectionNoiseConfig(_Section):
     max_range: float | None = Field(
         None,
         gt=0,
+        le=1e4,
         description="objects farther than this are not reported, m (the real stereo step: "
         "perception.stereo.max_depth); None: camera.max_range",
     )
@@ -170,20 +193,20 @@ class DetectionNoiseConfig(_Section):
     @field_validator("false_positive_depth")
     @classmethod
     def _depth_range(cls, depths):
-        if depths is not None and not 0 < depths[0] <= depths[1]:
-            raise ValueError("needs 0 < near <= far")
+        if depths is not None and not 0 < depths[0] <= depths[1] <= 1e4:
+            raise ValueError("needs 0 < near <= far <= 10000 m")
         return depths
 
 
 class OdometryNoiseConfig(_Section):
     """Noise of the visual odometry, applied to the true per-frame motion."""
 
-    sigma_speed: float = Field(0.2, ge=0, description="std of the forward speed, m/s, per frame")
-    sigma_yaw_rate: float = Field(0.01, ge=0, description="std of the yaw rate, rad/s, per frame")
-    speed_scale_bias: float = Field(0.01, description="relative speed error, +0.01 = 1 % too long")
-    yaw_rate_bias: float = Field(0.001, description="constant yaw-rate error, rad/s")
-    sigma_vertical_speed: float = Field(0.02, ge=0, description="std of the vertical speed, m/s")
-    sigma_pitch_rate: float = Field(0.002, ge=0, description="std of the pitch rate, rad/s")
+    sigma_speed: float = Field(0.2, ge=0, le=100, description="std of the forward speed, m/s, per frame")
+    sigma_yaw_rate: float = Field(0.01, ge=0, le=10, description="std of the yaw rate, rad/s, per frame")
+    speed_scale_bias: float = Field(0.01, ge=-1, le=10, description="relative speed error, +0.01 = 1 % too long")
+    yaw_rate_bias: float = Field(0.001, ge=-10, le=10, description="constant yaw-rate error, rad/s")
+    sigma_vertical_speed: float = Field(0.02, ge=0, le=100, description="std of the vertical speed, m/s")
+    sigma_pitch_rate: float = Field(0.002, ge=0, le=10, description="std of the pitch rate, rad/s")
 
 
 NOISE_PROFILES: dict[str, OdometryNoiseConfig] = {
@@ -207,7 +230,7 @@ NOISE_PROFILES: dict[str, OdometryNoiseConfig] = {
 class SimulatorConfig(_Section):
     """`neoslam simulate`: world, camera, detection and odometry noise."""
 
-    seed: int = Field(0, description="seed of every random draw of a simulation")
+    seed: int = Field(0, ge=0, le=2**63 - 1, description="seed of every random draw of a simulation")
     camera: CameraConfig = CameraConfig()
     world: WorldConfig = WorldConfig()
     detection: DetectionNoiseConfig = DetectionNoiseConfig()
@@ -219,7 +242,9 @@ class SimulatorConfig(_Section):
     )
     noise_profile: str = Field("vo", description="name of the odometry noise profile (see NOISE_PROFILES)")
     odometry: OdometryNoiseConfig = OdometryNoiseConfig()
-    frame_period: float = Field(0.1037, gt=0, description="s between frames when no times are given (KITTI mean)")
+    frame_period: float = Field(
+        0.1037, ge=0.001, le=10, description="s between frames when no times are given (KITTI mean)"
+    )
 
     @model_validator(mode="before")
     @classmethod
@@ -229,24 +254,37 @@ class SimulatorConfig(_Section):
         return with_detection_profile(data) if isinstance(data, dict) else data
 
 
+# Cells along one grid-cell axis: fewer than 4 leave no room for a packet (below 3 the activity dies at once);
+# 128^3 cells already cost ~50 ms a frame.
+GridAxis = Annotated[int, Field(ge=4, le=128)]
+
+
+def _odd_extent(size: int) -> int:
+    """A kernel extent must be odd: an even one has no centre cell and biases the packet by half a cell."""
+    if size % 2 == 0:
+        raise ValueError(f"must be odd (a centre cell and as many cells each side), got {size}")
+    return size
+
+
 class GridCellConfig(_Section):
     """3-D grid-cell continuous attractor network (paper 3.3, eq. 6; NeuroSLAM defaults)."""
 
-    dims: tuple[int, int, int] = Field((36, 36, 36), description="cells along x, y, z (all cyclic)")
-    excitation_size: int = Field(7, gt=0, description="excitatory kernel extent, cells")
-    excitation_sigma: float = Field(1.5, gt=0, description="δx = δy = δz of eq. 6, cells")
-    inhibition_size: int = Field(5, gt=0, description="inhibitory kernel extent, cells")
-    inhibition_sigma: float = Field(2.0, gt=0, description="inhibitory kernel σ, cells")
-    global_inhibition: float = Field(2e-4, ge=0, description="subtracted from every cell each step")
-    injection_energy: float = Field(0.1, ge=0, description="energy added at a recalled cell state")
-    packet_size: int = Field(4, ge=0, description="decode window = peak ± packet_size cells")
+    dims: tuple[GridAxis, GridAxis, GridAxis] = Field((36, 36, 36), description="cells along x, y, z (all cyclic)")
+    excitation_size: int = Field(7, gt=0, le=99, description="excitatory kernel extent, cells")
+    excitation_sigma: float = Field(1.5, ge=0.01, le=100, description="δx = δy = δz of eq. 6, cells")
+    inhibition_size: int = Field(5, gt=0, le=99, description="inhibitory kernel extent, cells")
+    inhibition_sigma: float = Field(2.0, ge=0.01, le=100, description="inhibitory kernel σ, cells")
+    global_inhibition: float = Field(2e-4, ge=0, le=1, description="subtracted from every cell each step")
+    injection_energy: float = Field(0.1, ge=0, le=10, description="energy added at a recalled cell state")
+    packet_size: int = Field(4, ge=0, le=64, description="decode window = peak ± packet_size cells")
     metres_per_cell: float = Field(
         8.0,
-        gt=0,
+        ge=0.01,
+        le=1000,
         description="horizontal metres of motion per cell: the paper's 7-bin check of loop candidates then admits "
         "56 m of odometry drift (2 m per cell rejected most true closures of KITTI 00 and 02, see kitti_sim.py)",
     )
-    metres_per_cell_vertical: float = Field(1.0, gt=0, description="vertical metres of motion per cell")
+    metres_per_cell_vertical: float = Field(1.0, ge=0.01, le=1000, description="vertical metres of motion per cell")
     shift_kernel: Literal["zero-skew", "linear"] = Field(
         "zero-skew",
         description="sub-cell path-integration shift: 3-tap zero-skew blend, or NeuroSLAM's 2-tap linear one "
@@ -257,18 +295,20 @@ class GridCellConfig(_Section):
     )
     dtype: Literal["float32", "float64"] = Field("float32", description="activity precision (float32: faster)")
 
+    _odd_kernels = field_validator("excitation_size", "inhibition_size")(_odd_extent)
+
 
 class HeadDirectionConfig(_Section):
     """1-D ring of head-direction cells for yaw (paper 3.3: 36 cells)."""
 
-    cells: int = Field(36, gt=0, description="cells around the ring (10 degrees each)")
-    excitation_size: int = Field(7, gt=0, description="excitatory kernel extent, cells")
-    excitation_sigma: float = Field(1.9, gt=0, description="excitatory σ, cells (NeuroSLAM)")
-    inhibition_size: int = Field(5, gt=0, description="inhibitory kernel extent, cells")
-    inhibition_sigma: float = Field(3.0, gt=0, description="inhibitory σ, cells (NeuroSLAM)")
-    global_inhibition: float = Field(2e-4, ge=0, description="subtracted from every cell each step")
-    injection_energy: float = Field(0.1, ge=0, description="energy added at a recalled cell state")
-    packet_size: int = Field(5, ge=0, description="decode window = peak ± packet_size cells")
+    cells: int = Field(36, ge=4, le=3600, description="cells around the ring (10 degrees each)")
+    excitation_size: int = Field(7, gt=0, le=99, description="excitatory kernel extent, cells")
+    excitation_sigma: float = Field(1.9, ge=0.01, le=100, description="excitatory σ, cells (NeuroSLAM)")
+    inhibition_size: int = Field(5, gt=0, le=99, description="inhibitory kernel extent, cells")
+    inhibition_sigma: float = Field(3.0, ge=0.01, le=100, description="inhibitory σ, cells (NeuroSLAM)")
+    global_inhibition: float = Field(2e-4, ge=0, le=1, description="subtracted from every cell each step")
+    injection_energy: float = Field(0.1, ge=0, le=10, description="energy added at a recalled cell state")
+    packet_size: int = Field(5, ge=0, le=1800, description="decode window = peak ± packet_size cells")
     shift_kernel: Literal["zero-skew", "linear"] = Field(
         "zero-skew",
         description="sub-cell path-integration shift: 3-tap zero-skew blend, or NeuroSLAM's 2-tap linear one",
@@ -278,38 +318,63 @@ class HeadDirectionConfig(_Section):
     )
     dtype: Literal["float32", "float64"] = Field("float32", description="activity precision (float32: faster)")
 
+    _odd_kernels = field_validator("excitation_size", "inhibition_size")(_odd_extent)
+
 
 class ObjectVectorConfig(_Section):
     """Object-vector cells network (paper 3.4, eq. 7-13)."""
 
-    peak_rate: float = Field(1.2, description="a of eq. 7, Hz")
-    baseline_rate: float = Field(0.0, description="b of eq. 7, Hz")
-    field_sigma: float = Field(5.0, gt=0, description="σ of eq. 10 along the preferred direction, m")
+    peak_rate: float = Field(1.2, ge=-1000, le=1000, description="a of eq. 7, Hz")
+    baseline_rate: float = Field(0.0, ge=-1000, le=1000, description="b of eq. 7, Hz")
+    field_sigma: float = Field(5.0, ge=0.01, le=1e4, description="σ of eq. 10 along the preferred direction, m")
     field_sigma_across: float | None = Field(
-        None, gt=0, description="σ across the preferred direction, m (elliptical field); None: equal, as eq. 10"
+        None,
+        ge=0.01,
+        le=1e4,
+        description="σ across the preferred direction, m (elliptical field); None: equal, as eq. 10",
     )
-    preferred_distance: float = Field(10.0, ge=0, description="distance of the field's centre, m")
-    preferred_direction: float = Field(0.0, description="allocentric direction of the field's centre, rad (φ, eq. 9)")
+    preferred_distance: float = Field(10.0, ge=0, le=1e4, description="distance of the field's centre, m")
+    preferred_direction: float = Field(
+        0.0, ge=-10, le=10, description="allocentric direction of the field's centre, rad (φ, eq. 9)"
+    )
     distance_scale: float = Field(
-        10.0, gt=0, description="inputs d are divided by this, m: about 2σ, so the field spans as much of d as of φ"
+        10.0,
+        ge=0.01,
+        le=1e4,
+        description="inputs d are divided by this, m: about 2σ, so the field spans as much of d as of φ",
     )
     direction_encoding: Literal["cos_sin", "raw"] = Field(
         "cos_sin", description="φ as (cos φ, sin φ), continuous across ±π (fits better), or raw radians / π"
     )
-    hidden_units: int = Field(32, gt=0, description="N hidden ELU units (eq. 12)")
+    hidden_units: int = Field(32, gt=0, le=4096, description="N hidden ELU units (eq. 12)")
     optimizer: Literal["adam", "sgd"] = Field("adam", description="plain SGD at lr 0.001 hardly learns in 10 epochs")
-    learning_rate: float = Field(0.001, gt=0, description="paper: 0.001")
-    batch_size: int = Field(1, gt=0, description="object vectors per update; 1: one per observation, as eq. 13")
-    epochs: int = Field(10, gt=0, description="paper: 10")
-    keyframes_per_epoch: int = Field(20, gt=0, description="paper: 20")
-    seed: int = Field(0, description="weight initialisation and shuffling seed")
+    learning_rate: float = Field(0.001, gt=0, le=10, description="paper: 0.001")
+    batch_size: int = Field(
+        1, gt=0, le=100_000, description="object vectors per update; 1: one per observation, as eq. 13"
+    )
+    epochs: int = Field(10, gt=0, le=1000, description="paper: 10")
+    keyframes_per_epoch: int = Field(20, gt=0, le=100_000, description="paper: 20")
+    seed: int = Field(0, ge=0, le=2**63 - 1, description="weight initialisation and shuffling seed")
 
 
 class HebbianConfig(_Section):
     """Keyframe-to-cell associations (eq. 14)."""
 
-    learning_rate: float = Field(1.0, gt=0, description="τ of eq. 14")
+    learning_rate: float = Field(1.0, gt=0, le=1e6, description="τ of eq. 14")
     sparsity: float = Field(0.1, gt=0, le=1, description="store only cells above this fraction of the peak")
+    recall_gain: float = Field(
+        20.0,
+        ge=0,
+        description="a recall injects this many times the cells' injection_energy (NeuroSLAM's energy per frame of "
+        "a re-seen view; a closure is a place verified over consecutive keyframes): 2.0 of a packet of 1 by "
+        "default, so a recall re-anchors the cells (at 0.1 it moved them 9 % of a 1-cell offset, none of 5 cells)",
+    )
+    recall_on: Literal["detected", "accepted"] = Field(
+        "detected",
+        description="which closures recall their place: every one the detector accepts (NeuroSLAM's local-view "
+        "calibration: the grid-cell check then compares re-anchored cells), or only those the check accepted (the "
+        "paper's order, under which a recall can only follow the check and never restores it after drift)",
+    )
 
 
 class KeyframeConfig(_Section):
@@ -319,49 +384,65 @@ class KeyframeConfig(_Section):
     so that a keyframe's object centres average many stereo measurements.
     """
 
-    e_max: float = Field(1.5, gt=0, description="e_max of eq. 2, m (paper)")
+    e_max: float = Field(1.5, gt=0, le=1000, description="e_max of eq. 2, m (paper)")
     neighbourhood_radius: float = Field(
-        30.0, gt=0, description="objects this close to the current object join its keyframe, m (paper: e_max)"
+        30.0, gt=0, le=1000, description="objects this close to the current object join its keyframe, m (paper: e_max)"
     )
     sparse_objects: int = Field(
         5,
         gt=0,
+        le=1000,
         description="where fewer objects stand within neighbourhood_radius (a sparse street: real KITTI streets "
         "through a real detector), the neighbourhood grows until it holds this many (5: measured against 6, 8 and "
         "no growth on the real revisit and on simulated drives, benchmarks/loops.py --config)",
     )
     sparse_neighbourhood_radius: float = Field(
-        60.0, gt=0, description="the largest the neighbourhood grows to on a sparse street, m"
+        60.0, gt=0, le=1000, description="the largest the neighbourhood grows to on a sparse street, m"
     )
-    spacing: float = Field(5.0, gt=0, description="a keyframe every this many metres of travel")
-    min_objects: int = Field(4, gt=0, description="fewer objects in the neighbourhood make no keyframe")
-    window_length: float = Field(60.0, gt=0, description="observations fused over this much recent travel, m")
-    association_radius: float = Field(2.5, gt=0, description="an observation joins a window object this close, m")
-    min_observations: int = Field(3, gt=0, description="window objects seen fewer times are left out")
+    spacing: float = Field(5.0, ge=0.01, le=1e4, description="a keyframe every this many metres of travel")
+    min_objects: int = Field(4, gt=0, le=1000, description="fewer objects in the neighbourhood make no keyframe")
+    window_length: float = Field(60.0, gt=0, le=1e4, description="observations fused over this much recent travel, m")
+    association_radius: float = Field(
+        2.5, gt=0, le=1000, description="an observation joins a window object this close, m"
+    )
+    min_observations: int = Field(3, gt=0, le=1_000_000, description="window objects seen fewer times are left out")
     footprints: dict[str, tuple[float, float]] = Field(
         default_factory=lambda: {"car": (4.3, 1.8), "truck": (8.0, 2.5), "bicycle": (1.8, 0.6), "person": (0.6, 0.6)},
         description="typical length and width of each class, m, lying along the road: stereo points lie on the "
         "visible surface, and the centre is half the footprint further along the viewing ray",
     )
     depth_sigma_at_1m: float = Field(
-        0.0015, gt=0, description="stereo depth std at 1 m, m; grows with depth^2 and weights the fusion"
+        0.0015, gt=0, le=1, description="stereo depth std at 1 m, m; grows with depth^2 and weights the fusion"
     )
+
+    @field_validator("footprints")
+    @classmethod
+    def _footprints_in_metres(cls, footprints: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
+        for label, (length, width) in footprints.items():
+            if not (0 <= length <= 100 and 0 <= width <= 100):
+                raise ValueError(f"{label}: length and width must lie in [0, 100] m, got ({length}, {width})")
+        return footprints
 
 
 class MatchingConfig(_Section):
     """Keyframe matching and verification (eq. 2-5)."""
 
-    appearance_rmse_threshold: float = Field(80.0, gt=0, description="max patch RMSE, 0-255 grey (paper)")
-    score_threshold: float = Field(1.0, ge=0, description="a score above this is a loop-closure candidate (paper)")
-    min_support: int = Field(2, ge=0, description="a match needs this many other matches with consistent e_ij")
-    min_inliers: int = Field(4, gt=0, description="verified matched objects needed to accept a closure")
+    appearance_rmse_threshold: float = Field(80.0, gt=0, le=1000, description="max patch RMSE, 0-255 grey (paper)")
+    score_threshold: float = Field(
+        1.0, ge=0, le=1e6, description="a score above this is a loop-closure candidate (paper)"
+    )
+    min_support: int = Field(2, ge=0, le=1000, description="a match needs this many other matches with consistent e_ij")
+    min_inliers: int = Field(4, gt=0, le=1000, description="verified matched objects needed to accept a closure")
     min_inlier_ratio: float = Field(
         0.7, ge=0, le=1, description="and this share of the smaller keyframe's objects (a place, not a pattern)"
     )
-    max_fit_residual: float = Field(0.6, gt=0, description="max RMS residual of the rigid fit, m (ground plane)")
+    max_fit_residual: float = Field(
+        0.6, gt=0, le=1000, description="max RMS residual of the rigid fit, m (ground plane)"
+    )
     inlier_distance: float = Field(
         1.2,
         gt=0,
+        le=1000,
         description="a match fits the rigid transform within this, m; others are left out of the fit and its RMS "
         "(about 3 σ of a right match seen from the other direction, where a truck's or a cross-street object's "
         "centre is off by a metre)",
@@ -369,6 +450,7 @@ class MatchingConfig(_Section):
     max_contradictions: int = Field(
         2,
         ge=0,
+        le=10_000,
         description="reject if under the fit more objects than this stand well inside the other keyframe's ground "
         "with no object of their label near them there: a place driven again shows the same objects, a street that "
         "only shares part of its layout shows others (closures accepted without this check, benchmarks/loops.py, "
@@ -377,6 +459,7 @@ class MatchingConfig(_Section):
     contradiction_radius: float = Field(
         2.5,
         gt=0,
+        le=1000,
         description="an object with one of its label this close under the fit is not contradicted, m "
         "(keyframes.association_radius: observations this close are one object; a right match seen from the other "
         "side or a truck's centre can be off by more than the inlier distance)",
@@ -384,12 +467,14 @@ class MatchingConfig(_Section):
     contradiction_margin: float = Field(
         3.0,
         ge=0,
+        le=1000,
         description="only objects this far inside the other keyframe's ground count, m: near its edge an object may "
         "fall in one keyframe and not in the other by the noise of its centre",
     )
     max_place_offset: float = Field(
         3.5,
         gt=0,
+        le=1000,
         description="accept only if the fit puts the two robot poses this close, m: the same place is within 5 m "
         "(evaluation.loop_max_distance), less the error of the fit's offset, up to 0.6 m with vo odometry and "
         "1.5 m with heavy (simulated KITTI drives)",
@@ -397,29 +482,37 @@ class MatchingConfig(_Section):
     max_vertical_offset: float = Field(
         6.0,
         gt=0,
+        le=1000,
         description="reject if the fit puts the two robot poses this far apart in height, m: a bridge "
         "over a street is another place (KITTI 02 and 08 ground truth disagree by up to 5.8 m at one place)",
     )
     max_yaw_drift_deg: float = Field(
         30.0,
         gt=0,
+        le=360,
         description="reject a fit that turns the query's world by more than this, degrees, plus yaw_drift_per_100m: "
         "its rotation is the odometry's heading drift between the two passes; a layout that is nearly point-"
         "symmetric can also fit turned by 180° (true closures accepted without this check, benchmarks/loops.py: "
         "at most 1.3°/100 m with vo odometry, 6.8°/100 m with heavy)",
     )
     yaw_drift_per_100m: float = Field(
-        3.0, ge=0, description="degrees per 100 m travelled since the stored keyframe, added to max_yaw_drift_deg"
+        3.0,
+        ge=0,
+        le=360,
+        description="degrees per 100 m travelled since the stored keyframe, added to max_yaw_drift_deg",
     )
-    exclude_recent_distance: float = Field(60.0, ge=0, description="never match keyframes from the last metres")
-    search_radius: float = Field(15.0, gt=0, description="candidates lie this close to the estimated position, m")
+    exclude_recent_distance: float = Field(60.0, ge=0, le=1e6, description="never match keyframes from the last metres")
+    search_radius: float = Field(
+        15.0, gt=0, le=1e5, description="candidates lie this close to the estimated position, m"
+    )
     search_radius_per_metre: float = Field(
-        0.1, ge=0, description="plus this share of the distance travelled since the candidate (odometry drift)"
+        0.1, ge=0, le=10, description="plus this share of the distance travelled since the candidate (odometry drift)"
     )
-    candidates: int = Field(10, gt=0, description="best retrieval candidates that are matched in full")
+    candidates: int = Field(10, gt=0, le=1000, description="best retrieval candidates that are matched in full")
     power_iterations: int = Field(
         50,
         gt=0,
+        le=10_000,
         description="at most this many products of the power iteration (spectral matching): keyframes of one place "
         "converge in about 16 (99 % within 35 on the simulated KITTI drives); those that need more have no "
         "dominant consistent group, the case that verification rejects",
@@ -427,64 +520,176 @@ class MatchingConfig(_Section):
     power_tolerance: float = Field(
         1e-5,
         gt=0,
+        le=1,
         description="the power iteration stops once no entry moves more than this: only the order of the entries "
         "is used, and it is settled long before",
     )
     consecutive: int = Field(
-        2, gt=0, description="accept only when this many consecutive keyframes relocalise consistently"
+        2, gt=0, le=100, description="accept only when this many consecutive keyframes relocalise consistently"
     )
     consistent_distance: float = Field(
-        2.0, gt=0, description="consecutive relocalisations put the robot within this of each other, m"
+        2.0, gt=0, le=1000, description="consecutive relocalisations put the robot within this of each other, m"
     )
-    consistent_yaw_deg: float = Field(5.0, gt=0, description="and within this yaw, degrees")
+    consistent_yaw_deg: float = Field(5.0, gt=0, le=180, description="and within this yaw, degrees")
 
 
 class ExperienceMapConfig(_Section):
     """Object experience map and its correction (paper 3.6, eq. 15-18)."""
 
-    gc_distance_threshold: float = Field(7.0, gt=0, description="max cell-space distance of a loop candidate, bins")
-    similarity_threshold: float = Field(3.0, gt=0, description="S_max of eq. 17, cells")
-    mu_gc: float = Field(1.0, ge=0, description="μ_gc of eq. 17")
-    mu_hdc: float = Field(1.0, ge=0, description="μ_hdc of eq. 17")
+    gc_distance_threshold: float = Field(
+        7.0, gt=0, le=1000, description="max cell-space distance of a loop candidate, bins"
+    )
+    similarity_threshold: float = Field(3.0, gt=0, le=1000, description="S_max of eq. 17, cells")
+    mu_gc: float = Field(1.0, ge=0, le=1000, description="μ_gc of eq. 17")
+    mu_hdc: float = Field(1.0, ge=0, le=1000, description="μ_hdc of eq. 17")
     correction_factor: float = Field(0.5, gt=0, le=1, description="c_f of eq. 18 (NeuroSLAM: 0.5)")
-    correction_loops: int = Field(5, ge=0, description="relaxation passes per frame (NeuroSLAM: 5)")
+    correction_loops: int = Field(5, ge=0, le=100, description="relaxation passes per frame (NeuroSLAM: 5)")
     backend: Literal["relaxation", "pose-graph"] = Field(
         "pose-graph", description="map correction: the paper's relaxation (eq. 18), or GTSAM pose-graph optimisation"
     )
     odometry_sigma_per_root_metre: float = Field(
-        0.05, gt=0, description="pose graph: an odometry link's translation std is this times sqrt(metres), m"
+        0.05,
+        ge=1e-6,
+        le=1000,
+        description="pose graph: an odometry link's translation std is this times sqrt(metres), m",
     )
     odometry_yaw_sigma_per_root_metre: float = Field(
-        0.005, gt=0, description="pose graph: an odometry link's yaw std is this times sqrt(metres), rad"
+        0.005, ge=1e-6, le=10, description="pose graph: an odometry link's yaw std is this times sqrt(metres), rad"
     )
-    odometry_sigma_floor: float = Field(0.01, gt=0, description="pose graph: least translation std of a link, m")
-    loop_sigma: float = Field(0.5, gt=0, description="pose graph: std of a loop link's translation, m")
-    loop_yaw_sigma: float = Field(0.02, gt=0, description="pose graph: std of a loop link's yaw, rad")
+    odometry_sigma_floor: float = Field(
+        0.01, ge=1e-6, le=1000, description="pose graph: least translation std of a link, m"
+    )
+    loop_sigma: float = Field(0.5, ge=1e-6, le=1000, description="pose graph: std of a loop link's translation, m")
+    loop_yaw_sigma: float = Field(0.02, ge=1e-6, le=10, description="pose graph: std of a loop link's yaw, rad")
     robust_kernel: Literal["huber", "cauchy", "none"] = Field("huber", description="pose graph: loop-link kernel")
-    robust_threshold: float = Field(3.0, gt=0, description="pose graph: kernel scale, in standard deviations")
+    robust_threshold: float = Field(3.0, gt=0, le=1000, description="pose graph: kernel scale, in standard deviations")
+    reuse_places: bool = Field(
+        True,
+        description="lifelong mapping (RatSLAM's rule, beyond the paper): a keyframe that a closure recognises as a "
+        "stored one is not stored again and the robot re-enters its experience; while it knows where it is, it "
+        "re-enters experiences found at its corrected pose instead of making new ones. False: every keyframe is "
+        "stored and makes an experience (the paper), and a street driven every day grows the map every day",
+    )
+    reuse_radius: float = Field(
+        5.0,
+        gt=0,
+        description="re-enter an experience this close to the corrected pose, m (keyframes.spacing: the stored "
+        "keyframe nearest to a new one on a street driven again is within a spacing; at 3 m, passes of KITTI 00 "
+        "still stored keyframes 3-4 m from a stored one)",
+    )
+    reuse_max_turn_deg: float = Field(
+        45.0,
+        gt=0,
+        le=180,
+        description="and only if headed within this of it, degrees: the same street driven the other way is another "
+        "experience (another head-direction state), as is a crossing street",
+    )
+    reentry_distance: float = Field(
+        1.5,
+        gt=0,
+        description="a closure re-enters the stored keyframe's experience only if it puts the robot within this of "
+        "where the map has it (ground plane), m (3 loop_sigma); otherwise the map is off (the robot comes back after "
+        "a long loop) and the keyframe is stored with a new experience and a loop link that corrects it, as the "
+        "paper does",
+    )
+    reentry_yaw_deg: float = Field(
+        3.0, gt=0, description="and turned within this of where the map has it, degrees (about 3 loop_yaw_sigma)"
+    )
+    localised_distance: float = Field(
+        100.0,
+        ge=0,
+        description="the robot knows where it is for this much travel after a recognised place, m (vo odometry "
+        "drifts about 1 m in 100 m); 0: re-enter experiences only on a closure",
+    )
 
 
 class ObjectMapConfig(_Section):
     """The object map written to objects.csv: observations fused by label and distance."""
 
-    association_radius: float = Field(2.5, gt=0, description="an observation joins the nearest object this close, m")
-    min_observations: int = Field(3, gt=0, description="objects seen fewer times are left out of objects.csv")
+    association_radius: float = Field(
+        2.5, gt=0, le=1000, description="an observation joins the nearest object this close, m"
+    )
+    min_observations: int = Field(
+        3, gt=0, le=1_000_000, description="objects seen fewer times are left out of objects.csv"
+    )
+    depth_sigma_at_1m: float = Field(
+        0.0015,
+        gt=0,
+        description="stereo depth std at 1 m, m (keyframes.depth_sigma_at_1m); grows with depth^2: observations are "
+        "weighted by their inverse variance, and a far one is associated along its viewing ray within gate_sigmas",
+    )
+    position_sigma_floor: float = Field(
+        0.3,
+        gt=0,
+        description="no observed centre is known better than this, m (it lies on the visible surface, which changes "
+        "with the view): observations nearer than about 14 m weigh alike",
+    )
+    gate_sigmas: float = Field(
+        2.0,
+        gt=0,
+        description="an observation joins an object within this many depth stds along its viewing ray (at least "
+        "association_radius) and association_radius across it: else a far, noisy view of a known object starts a "
+        "new one, and a street driven every day collects copies",
+    )
+    height_tolerance: float = Field(
+        6.0,
+        gt=0,
+        description="an observation joins an object within this in height, m (at least association_radius; "
+        "matching.max_vertical_offset): the association radius holds in the ground plane, where objects stand apart; "
+        "the pose's height and pitch drift move a view 50 m away up or down by 2 m and more, while objects rarely "
+        "stand above each other (a bridge)",
+    )
+    tentative_distance: float = Field(
+        60.0,
+        gt=0,
+        description="an object seen fewer than min_observations times is forgotten after this much travel without "
+        "another sighting, m (keyframes.window_length): a false detection, or an object glimpsed once a pass, would "
+        "otherwise pile up into an object on a street driven every day",
+    )
+
+
+class MotionLimitsConfig(_Section):
+    """Motion no road vehicle makes: an input that claims it (frames.csv velocities, an --odometry pose file, a
+    `simulate --trajectory` file) is refused with its file, line and value, instead of being integrated. It keeps
+    a wrong value (a unit slip, a corrupt line, 1e300) from becoming a map, and every frame's work bounded."""
+
+    max_speed: float = Field(
+        70.0,
+        gt=0,
+        le=1000,
+        description="largest speed between two frames, m/s (70 m/s = 252 km/h; KITTI's ground truth: 26 m/s at most)",
+    )
+    max_turn_rate: float = Field(
+        3.0,
+        gt=0,
+        le=100,
+        description="largest rotation rate between two frames (about any axis), rad/s: about half a turn a second; "
+        "KITTI's ground truth turns at 0.81 rad/s at most, and the paper-max odometry noise (0.5 rad/s std) reaches "
+        "it once in 5e8 frames",
+    )
+    max_time_step: float = Field(
+        10.0,
+        gt=0,
+        le=86400,
+        description="largest time between two frames, s (KITTI: 0.1 s): across a longer gap the recording stopped, "
+        "and integrating a velocity over it means nothing",
+    )
 
 
 class EvaluationConfig(_Section):
     """How results are judged against ground truth (never read by the SLAM path)."""
 
-    loop_max_distance: float = Field(5.0, gt=0, description="a true closure's frames are this close, m")
-    loop_min_frame_gap: int = Field(100, ge=0, description="and at least this many frames apart")
+    loop_max_distance: float = Field(5.0, gt=0, le=1e4, description="a true closure's frames are this close, m")
+    loop_min_frame_gap: int = Field(100, ge=0, le=10_000_000, description="and at least this many frames apart")
     loop_distance: Literal["3d", "horizontal"] = Field(
         "horizontal",
         description="distance of that test: horizontal, since KITTI 02 and 08 ground truth disagree by up to 5.8 m "
         "in height where a road is driven again; or 3d",
     )
     alignment: Literal["se3", "sim3", "none"] = Field("se3", description="alignment before ATE")
-    rpe_delta: float = Field(100.0, gt=0, description="RPE pair spacing")
+    rpe_delta: float = Field(100.0, gt=0, le=1e6, description="RPE pair spacing")
     rpe_unit: Literal["frames", "m"] = Field("m", description="unit of rpe_delta")
-    max_time_difference: float = Field(0.01, gt=0, description="timestamp association tolerance, s")
+    max_time_difference: float = Field(0.01, gt=0, le=1000, description="timestamp association tolerance, s")
 
 
 class NeoSLAMConfig(_Section):
@@ -501,6 +706,7 @@ class NeoSLAMConfig(_Section):
     experience_map: ExperienceMapConfig = ExperienceMapConfig()
     object_map: ObjectMapConfig = ObjectMapConfig()
     evaluation: EvaluationConfig = EvaluationConfig()
+    motion_limits: MotionLimitsConfig = MotionLimitsConfig()
 
 
 def _env_overrides(environ: dict[str, str]) -> dict[str, Any]:
@@ -526,46 +732,72 @@ def _parse_scalar(raw: str) -> Any:
         return raw
 
 
-def _merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
+def merge_settings(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:
+    """`override` over `base`, section by section (nested mappings merged, other values replaced)."""
     merged = dict(base)
     for key, value in override.items():
-        if isinstance(value, dict) and isinstance(merged.get(key), dict):
-            merged[key] = _merge(merged[key], value)
+        if isinstance(value, Mapping) and isinstance(merged.get(key), Mapping):
+            merged[key] = merge_settings(merged[key], value)
         else:
             merged[key] = value
     return merged
 
 
-def _describe(error: ValidationError) -> str:
+def describe_validation_error(error: ValidationError) -> str:
+    """The first problem of a validation as `section.field: reason (got value)`, for a one-line message."""
     first = error.errors()[0]
     where = ".".join(str(part) for part in first["loc"])
-    return f"{where}: {first['msg']}"
+    reason = first["msg"].removeprefix("Value error, ")
+    given = first.get("input")
+    if isinstance(given, bool | int | float | str) and len(repr(given)) <= 40 and first["type"] != "extra_forbidden":
+        reason += f" (got {given!r})"
+    return f"{where}: {reason}" if where else reason
+
+
+def _variable_for(location: tuple[Any, ...], environ: dict[str, str]) -> str:
+    """The NEOSLAM_* variable that set the value at `location` (or under it: NEOSLAM_FOO__BAR for an unknown
+    section foo), as the user spelled it."""
+    wanted = tuple(str(part) for part in location)
+    for key in sorted(environ):
+        if not key.startswith(ENV_PREFIX) or ENV_NESTED_DELIMITER not in key:
+            continue
+        path = tuple(key[len(ENV_PREFIX) :].lower().split(ENV_NESTED_DELIMITER))
+        if wanted[: len(path)] == path or path[: len(wanted)] == wanted:
+            return key
+    return ENV_PREFIX + ENV_NESTED_DELIMITER.join(wanted).upper()
+
+
+def _read_yaml_mapping(path: Path) -> dict[str, Any]:
+    """A config file's sections: one error naming the file (and the line, where YAML knows it) otherwise."""
+    if not path.is_file():
+        raise InputError(path, "config file not found")
+    try:
+        loaded = yaml.safe_load(read_text(path)) or {}
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        line = mark.line + 1 if mark is not None else None
+        raise InputError(path, f"not valid YAML ({error.__class__.__name__})", line=line) from None
+    except RecursionError:
+        raise InputError(path, "not valid YAML (nested too deeply)") from None
+    if not isinstance(loaded, dict):
+        raise InputError(path, "a config file must hold a mapping of sections")
+    return loaded
 
 
 def load_config(path: Path | None = None, environ: dict[str, str] | None = None) -> NeoSLAMConfig:
     """Defaults, then the YAML file, then NEOSLAM_* environment variables."""
-    values: dict[str, Any] = {}
-    if path is not None:
-        if not path.is_file():
-            raise InputError(path, "config file not found")
-        try:
-            loaded = yaml.safe_load(path.read_text()) or {}
-        except yaml.YAMLError as error:
-            raise InputError(path, f"not valid YAML ({error.__class__.__name__})") from None
-        if not isinstance(loaded, dict):
-            raise InputError(path, "a config file must hold a mapping of sections")
-        values = loaded
-    env = _env_overrides(dict(os.environ if environ is None else environ))
+    values = _read_yaml_mapping(path) if path is not None else {}
+    variables = dict(os.environ if environ is None else environ)
+    env = _env_overrides(variables)
     try:
         NeoSLAMConfig.model_validate(values)
     except ValidationError as error:
-        raise ConfigError(f"{path or 'configuration'}: {_describe(error)}") from None
+        raise ConfigError(f"{path or 'configuration'}: {describe_validation_error(error)}") from None
     try:
-        return NeoSLAMConfig.model_validate(_merge(values, env))
+        return NeoSLAMConfig.model_validate(merge_settings(values, env))
     except ValidationError as error:
-        first = error.errors()[0]["loc"]
-        variable = ENV_PREFIX + ENV_NESTED_DELIMITER.join(str(part) for part in first).upper()
-        raise ConfigError(f"environment variable {variable}: {_describe(error)}") from None
+        variable = _variable_for(error.errors()[0]["loc"], variables)
+        raise ConfigError(f"environment variable {variable}: {describe_validation_error(error)}") from None
 
 
 def dump_config(config: NeoSLAMConfig) -> str:

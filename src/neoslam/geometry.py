@@ -20,6 +20,7 @@ __all__ = [
     "transform_points",
     "SimilarityTransform",
     "umeyama_alignment",
+    "is_single_place",
     "integrate_body_velocities",
     "body_velocities",
     "planar_motion",
@@ -114,15 +115,32 @@ class SimilarityTransform:
         return make_pose(self.scale * self.rotation, self.translation)
 
 
+def is_single_place(points: np.ndarray) -> bool:
+    """True when (n, 3) points do not spread beyond float rounding of their magnitude: all at one place."""
+    points = np.asarray(points, dtype=float)
+    with np.errstate(over="ignore", invalid="ignore"):  # huge coordinates spread to inf: not one place
+        spread = np.sqrt(((points - points.mean(axis=0)) ** 2).sum(axis=1).mean())
+        return bool(spread <= 1e-9 * (1.0 + np.abs(points).max()))
+
+
 def umeyama_alignment(source: np.ndarray, target: np.ndarray, with_scale: bool = False) -> SimilarityTransform:
-    """Least-squares s, R, t with target ≈ s R source + t (Umeyama 1991), for (n, 3) point sets, n >= 3."""
+    """Least-squares s, R, t with target ≈ s R source + t (Umeyama 1991), for (n, 3) point sets, n >= 3.
+
+    With scale, point sets that do not move are refused (ValueError): the scale is the ratio of their spreads,
+    0 or undefined for a set at one place, which would shrink any estimate onto a still truth (an error of 0).
+    """
     if source.shape != target.shape or source.ndim != 2 or source.shape[1] != 3:
         raise ValueError(f"need two (n, 3) point sets of equal shape, got {source.shape} and {target.shape}")
     if len(source) < 3:
         raise ValueError("alignment needs at least 3 points")
+    if with_scale and (is_single_place(source) or is_single_place(target)):
+        raise ValueError("degenerate alignment: a point set is at one place, so the scale is undefined")
     mean_src, mean_tgt = source.mean(axis=0), target.mean(axis=0)
     src_c, tgt_c = source - mean_src, target - mean_tgt
     covariance = tgt_c.T @ src_c / len(source)
+    if not np.isfinite(covariance).all():
+        # LAPACK's SVD can loop forever on inf or NaN (coordinates near 1e308 overflow here): refuse instead.
+        raise ValueError("alignment overflows: the coordinates are too large")
     u, singular, vt = np.linalg.svd(covariance)
     sign = np.eye(3)
     if np.linalg.det(u) * np.linalg.det(vt) < 0:  # reflection: flip the weakest axis

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol
@@ -11,14 +11,17 @@ from typing import Any, Protocol
 import numpy as np
 from tqdm import tqdm
 
-from neoslam.config import NOISE_PROFILES, NeoSLAMConfig
+from neoslam.config import NOISE_PROFILES, MotionLimitsConfig, NeoSLAMConfig
+from neoslam.datasets.bag import BagSequence, is_bag, open_bag
 from neoslam.datasets.kitti import KittiSequence, is_kitti_root, read_kitti_sequence, sequences_in
 from neoslam.datasets.simulated import is_simulated_dataset, read_dataset, write_dataset
 from neoslam.errors import ConfigError, InputError
 from neoslam.evaluation.report import cell_metrics, loop_metrics, timing_metrics, trajectory_metrics
 from neoslam.evaluation.trajectory_metrics import associate
-from neoslam.geometry import SimilarityTransform, fit_yaw_translation
-from neoslam.io.atomic import atomic_directory, atomic_file
+from neoslam.geometry import SimilarityTransform, fit_yaw_translation, is_single_place
+from neoslam.io.atomic import atomic_directory, atomic_file, check_target_file
+from neoslam.io.g2o import write_g2o
+from neoslam.io.motion_limits import check_pose_steps, check_trajectory_file
 from neoslam.io.results import (
     read_loop_closures,
     write_config,
@@ -44,6 +47,7 @@ from neoslam.viz.plots import (
     plot_matching_scores,
     plot_ovcn_loss,
 )
+from neoslam.viz.rerun_view import check_rerun_target, recording_target, rerun_session
 
 __all__ = [
     "DEFAULT_ROUTE",
@@ -113,6 +117,7 @@ def record(
     sim = config.simulator
     if trajectory is not None:
         truth = read_trajectory(trajectory, fmt, times, frame_period=sim.frame_period)
+        check_trajectory_file(trajectory, truth, config.motion_limits, times)
         return simulate(truth, sim, name=trajectory.stem, source=str(trajectory), progress=progress)
     name = route or DEFAULT_ROUTE
     if name not in ROUTES:
@@ -121,19 +126,30 @@ def record(
     return simulate(truth, sim, name=name, source=f"route:{name}", progress=progress, route=ROUTES[name])
 
 
-def simulate_dataset(out: Path, recording: SimulatedRecording, overwrite: bool = False) -> None:
-    with atomic_directory(out, overwrite) as staging:
+def simulate_dataset(
+    out: Path, recording: SimulatedRecording, overwrite: bool = False, read: Sequence[Path | None] = ()
+) -> None:
+    """Write a simulated dataset folder; `read` names the files the simulation read, which it must not replace."""
+    with atomic_directory(out, overwrite, read) as staging:
         write_dataset(staging, recording)
 
 
 @dataclass(frozen=True)
 class ImageInputs:
-    """What a run on a KITTI image sequence needs besides the root: the sequence, and optionally detections and
-    odometry from files instead of the built-in detector and stereo odometry."""
+    """What a run on a KITTI image sequence or a ROS bag needs besides its path: the KITTI sequence or the bag's
+    topics (found in the bag when unambiguous), and optionally detections and odometry from files (or a bag's
+    odometry topic) instead of the built-in detector and stereo odometry."""
 
     sequence: str | None = None
     detections: Path | None = None
     odometry: Path | None = None
+    left_topic: str | None = None
+    right_topic: str | None = None
+    odometry_topic: str | None = None
+
+    def files(self) -> list[Path]:
+        """The files a run reads besides the dataset (an output must not replace them)."""
+        return [path for path in (self.detections, self.odometry) if path is not None]
 
 
 def _kitti_sequence(root: Path, name: str | None) -> KittiSequence:
@@ -144,17 +160,53 @@ def _kitti_sequence(root: Path, name: str | None) -> KittiSequence:
     return read_kitti_sequence(root, name)
 
 
+def _bag_sequence(path: Path, config: NeoSLAMConfig, inputs: ImageInputs, motion: bool = True) -> BagSequence:
+    """A bag's stereo sequence; with `motion`, its odometry topic too when one is named (or when the config asks
+    for poses and no pose file is given: then the bag's only nav_msgs/Odometry topic)."""
+    if inputs.sequence is not None:
+        raise ConfigError("--sequence applies to KITTI roots; choose a bag's cameras with --left-topic/--right-topic")
+    if inputs.odometry is not None and inputs.odometry_topic is not None:
+        raise ConfigError("give either --odometry FILE or --odometry-topic, not both")
+    wanted = motion and config.perception.odometry.source == "poses" and inputs.odometry is None
+    odometry_topic = inputs.odometry_topic if motion else None
+    bag = config.perception.bag
+    return open_bag(path, bag, inputs.left_topic, inputs.right_topic, odometry_topic, odometry_wanted=wanted)
+
+
+def _check_bag_odometry(path: Path, bag: BagSequence, limits: MotionLimitsConfig) -> None:
+    """A bag's odometry topic is held to the motion limits as a pose file is, the frame named instead of a line."""
+    if bag.odometry is None:
+        return
+    try:
+        check_pose_steps(path, bag.odometry, limits, np.arange(len(bag.odometry)))
+    except InputError as error:
+        where = f"odometry topic {bag.topics.odometry}, frame {error.line}"
+        raise InputError(path, f"{where}: {error.problem}") from None
+
+
 def _load(data: Path, config: NeoSLAMConfig, inputs: ImageInputs) -> Dataset:
     if not data.exists():
         raise InputError(data, "dataset folder not found")
+    if (inputs.left_topic, inputs.right_topic, inputs.odometry_topic) != (None, None, None) and not is_bag(data):
+        raise ConfigError("--left-topic, --right-topic and --odometry-topic apply to ROS bags only")
     if is_simulated_dataset(data):
         if inputs != ImageInputs():
             raise ConfigError("--sequence, --detections and --odometry apply to KITTI image sequences only")
-        return read_dataset(data)
+        return read_dataset(data, config.motion_limits)
     if is_kitti_root(data):
         sequence = _kitti_sequence(data, inputs.sequence)
-        return open_front_end(sequence, config.perception, inputs.detections, inputs.odometry)
-    raise InputError(data, "neither a simulated dataset (dataset.yaml) nor a KITTI odometry root (sequences/)")
+        return open_front_end(sequence, config.perception, inputs.detections, inputs.odometry, config.motion_limits)
+    if is_bag(data):
+        bag = _bag_sequence(data, config, inputs)
+        if inputs.odometry is None and bag.odometry is not None:
+            _check_bag_odometry(data, bag, config.motion_limits)
+        odometry = inputs.odometry if inputs.odometry is not None else bag.odometry
+        return open_front_end(bag, config.perception, inputs.detections, odometry, config.motion_limits)
+    raise InputError(
+        data,
+        "neither a simulated dataset (dataset.yaml) nor a KITTI odometry root (sequences/) nor a ROS bag (.bag, "
+        ".db3, .mcap, or a folder with metadata.yaml)",
+    )
 
 
 def _metrics(dataset: Dataset, result: RunResult, config: NeoSLAMConfig, wall_s: float) -> dict[str, Any]:
@@ -237,17 +289,23 @@ def run_dataset(
     overwrite: bool = False,
     progress: bool = True,
     inputs: ImageInputs = ImageInputs(),
+    read: Sequence[Path | None] = (),
+    rerun: str | None = None,
 ) -> dict[str, Any]:
-    """Run NeoSLAM on a dataset folder or KITTI sequence (or simulate the default scenario first) and write the
-    results folder."""
-    with atomic_directory(out, overwrite) as staging:
+    """Run NeoSLAM on a dataset folder, KITTI sequence or ROS bag (or simulate the default scenario first) and
+    write the results folder. `read` names further files the run reads (a config file), which the output must not
+    replace. `rerun`: "spawn" shows the run live in the Rerun viewer, a path ending .rrd records it there."""
+    check_rerun_target(rerun)
+    with atomic_directory(out, overwrite, [data, *inputs.files(), *read]) as staging:
         if data is None:
             write_dataset(staging / "dataset", record(config, route=DEFAULT_ROUTE, progress=progress))
             data = staging / "dataset"
         dataset = _load(data, config, inputs)
-        start = time.perf_counter()
-        result = run(dataset.frames(), config, total=len(dataset), progress=progress)
-        wall_s = time.perf_counter() - start
+        viewer = recording_target(rerun, out, staging)
+        with rerun_session(viewer, dataset, overwrite, [data, *inputs.files(), *read]) as on_step:
+            start = time.perf_counter()
+            result = run(dataset.frames(), config, total=len(dataset), progress=progress, on_step=on_step)
+            wall_s = time.perf_counter() - start
         trajectories = {"trajectory": result.estimate, "odometry": result.odometry}
         if dataset.ground_truth is not None:
             trajectories["groundtruth"] = dataset.ground_truth
@@ -256,6 +314,7 @@ def run_dataset(
         write_objects(staging / "objects.csv", result.objects)
         write_object_vector_cells(staging, result.object_vector_cells)
         write_experience_map(staging / "experience_map.json", result.experience_map)
+        write_g2o(staging / "experience_map.g2o", result.experience_map)
         write_config(staging / "config.yaml", config)
         metrics = _metrics(dataset, result, config, wall_s)
         write_metrics(staging / "metrics.json", metrics)
@@ -270,16 +329,25 @@ def detect_sequence(
     config: NeoSLAMConfig,
     overwrite: bool = False,
     progress: bool = True,
+    read: Sequence[Path | None] = (),
+    topics: ImageInputs = ImageInputs(),
 ) -> dict[str, int]:
-    """Run the configured detector over a KITTI sequence's left images and write its detections as JSON lines
-    (the format `--detections` reads), so that a detector runs once and its output can be inspected and reused."""
+    """Run the configured detector over a KITTI sequence's or a ROS bag's left images and write its detections as
+    JSON lines (the format `--detections` reads), so that a detector runs once and its output can be inspected and
+    reused. `topics` names a bag's camera topics (frames are the bag's stereo pairs, as a run numbers them)."""
     from neoslam.perception.detections_file import write_detections_file
     from neoslam.perception.detector import make_detector
 
-    if not is_kitti_root(root):
+    inputs = [root, *read]
+    check_target_file(out, overwrite, inputs)
+    sequence: KittiSequence | BagSequence
+    if is_bag(root):
+        sequence = _bag_sequence(root, config, replace(topics, sequence=sequence_name), motion=False)
+    elif not is_kitti_root(root):
         raise InputError(root, "not a KITTI odometry root (sequences/NN/image_0, image_1, calib.txt, times.txt)")
-    sequence = _kitti_sequence(root, sequence_name)
-    with atomic_file(out, overwrite) as staging:
+    else:
+        sequence = _kitti_sequence(root, sequence_name)
+    with atomic_file(out, overwrite, inputs) as staging:
         detector = make_detector(config.perception.detector)
         indices = tqdm(range(len(sequence)), desc="detect", unit="frame", disable=not progress, leave=False)
         per_frame = {i: detector.detect(i, sequence.left_image(i)) for i in indices}
@@ -294,16 +362,32 @@ def evaluate_files(
     estimate_format: str = "auto",
     truth_format: str = "auto",
     loops_path: Path | None = None,
+    json_out: Path | None = None,
+    read: Sequence[Path | None] = (),
 ) -> dict[str, Any]:
-    """Metrics of an estimate file against a ground-truth file (timestamps associated first)."""
+    """Metrics of an estimate file against a ground-truth file (timestamps associated first), also written to
+    `json_out` if named (never over one of the files read)."""
+    inputs = [estimate_path, truth_path, loops_path, *read]
+    if json_out is not None:
+        check_target_file(json_out, overwrite=True, inputs=inputs)
     estimate = read_trajectory(estimate_path, estimate_format)
     truth = read_trajectory(truth_path, truth_format)
     try:
         matched_estimate, matched_truth = associate(estimate, truth, config.evaluation.max_time_difference)
     except ValueError as error:
         raise InputError(estimate_path, f"cannot be matched with {truth_path.name}: {error}") from None
-    metrics: dict[str, Any] = {"matched_poses": len(matched_estimate), "alignment": config.evaluation.alignment}
+    alignment = config.evaluation.alignment
+    for path, matched in ((truth_path, matched_truth), (estimate_path, matched_estimate)):
+        if alignment == "sim3" and len(matched) >= MIN_ALIGNMENT_POSES and is_single_place(matched.positions):
+            # As evo: a scale fitted to a trajectory that never moves is 0 or undefined, and the ATE meaningless.
+            problem = f"the {len(matched)} matched poses are all at one place: a sim3 alignment has no scale"
+            raise InputError(path, f"{problem} (use --align se3 or none)")
+    metrics: dict[str, Any] = {"matched_poses": len(matched_estimate), "alignment": alignment}
     metrics |= trajectory_metrics(matched_estimate, matched_truth, config.evaluation)
     if loops_path is not None:
-        metrics["loops"] = loop_metrics(read_loop_closures(loops_path), truth, config.evaluation)
+        closures = read_loop_closures(loops_path, frames=len(truth))
+        metrics["loops"] = loop_metrics(closures, truth, config.evaluation)
+    if json_out is not None:
+        with atomic_file(json_out, overwrite=True, inputs=inputs) as staging:
+            write_metrics(staging, metrics)
     return metrics

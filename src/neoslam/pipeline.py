@@ -9,22 +9,26 @@ loop (3.6), whose corrected trajectory is the estimate.
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
 
 import numpy as np
 from tqdm import tqdm
 
 from neoslam.cells import GridCells, HeadDirectionCells, HebbianMemory, ObjectVectorCells, circular_difference
+from neoslam.cells.attractor import ShiftKernel, circular_mean, circular_shift
 from neoslam.config import NeoSLAMConfig
-from neoslam.geometry import planar_motion
+from neoslam.geometry import invert_pose, planar_motion
 from neoslam.loop.detector import LoopClosureDetector
 from neoslam.loop.keyframes import KeyframeBuilder
-from neoslam.mapping.experience_map import CellState, ExperienceMap
+from neoslam.mapping.experience_map import CellState, ExperienceMap, Revisit
 from neoslam.mapping.object_map import MapObject, ObjectMap
 from neoslam.types import Frame, Keyframe, LoopClosure, Trajectory
 
-__all__ = ["NeoSLAM", "RunResult", "run", "object_vectors"]
+__all__ = ["NeoSLAM", "RunResult", "StepObserver", "run", "object_vectors"]
+
+FRAMES_PER_CHUNK = 4096  # the per-frame record grows a chunk at a time: no doubling, no copy of what it holds
+RECORD_WIDTH = 29  # timestamp, odometry pose (12), pose estimate (12), cells (4)
 
 
 @dataclass(frozen=True)
@@ -42,6 +46,9 @@ class RunResult:
     object_vector_cells: ObjectVectorCells
     hebbian: HebbianMemory
     frame_times_s: np.ndarray  # wall time of each step
+    # Frame of every keyframe made, stored or recognised as a stored one (the query frames of loop recall);
+    # `keyframes` holds the stored ones, the map's.
+    keyframe_frames: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
 
 
 def object_vectors(pose: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -61,7 +68,7 @@ class NeoSLAM:
         self.hebbian = HebbianMemory(config.hebbian)
         self.keyframes = KeyframeBuilder(config.keyframes)
         self.loop_detector = LoopClosureDetector(config.keyframes, config.matching)
-        self.object_map = ObjectMap(config.object_map)
+        self.object_map = ObjectMap(config.object_map, config.keyframes.footprints)
         self.experience_map = ExperienceMap(config.experience_map, self.grid_cells.dims, config.head_direction.cells)
         self.detected_closures: list[LoopClosure] = []  # accepted by the loop-closure detector
         self.loop_closures: list[LoopClosure] = []  # and by the experience map's grid-cell check
@@ -69,10 +76,12 @@ class NeoSLAM:
         self._grid_position = np.zeros(3)  # decoded grid-cell position unwrapped over the torus, metres
         self._grid_centre = self.grid_cells.centre
         self._object_vector_batch: list[tuple[np.ndarray, np.ndarray]] = []
-        self._timestamps: list[float] = []
-        self._estimate: list[np.ndarray] = []
-        self._odometry: list[np.ndarray] = []
-        self._cell_states: list[np.ndarray] = []
+        self._unassociated: list[tuple[Keyframe, np.ndarray, np.ndarray]] = []  # made before the OVCN learnt
+        self._query_poses: dict[int, np.ndarray] = {}  # odometry pose of the keyframes a closure can come from
+        # Per frame, in chunks of arrays (a lifelong drive records many frames): timestamp, odometry pose and pose
+        # estimate (3x4 rows each), decoded cells (x, y, z, heading).
+        self._chunks: list[np.ndarray] = []
+        self._recorded = 0
 
     def step(self, frame: Frame) -> np.ndarray:
         """Process one frame (the paper's steps in order); returns the current pose estimate T_world_robot."""
@@ -82,15 +91,22 @@ class NeoSLAM:
         cells = self._cell_state()
         velocities = (frame.linear_velocity, frame.angular_velocity)
         keyframe_id = keyframe.id if keyframe is not None else None
-        self.experience_map.step(frame.index, odometry, velocities, cells, travelled_m, keyframe_id)  # 3.6
+        closures: list[LoopClosure] = []
+        revisit = None
+        if keyframe is not None:  # 3.2 matching; a stored keyframe seen again is not stored twice (lifelong)
+            closures = self.loop_detector.query(keyframe, self.keyframes.odometer_m)
+            revisit = self.experience_map.recognise(keyframe.id, closures, cells, odometry)
+        self.experience_map.step(frame.index, odometry, velocities, cells, travelled_m, keyframe_id, revisit)  # 3.6
         if keyframe is not None:
             self._learn_object_vectors(keyframe)  # 3.4
-            self._associate(keyframe)  # 3.5
-            self._close_loop(keyframe, cells)  # 3.2 matching, 3.6 loop links
+            if revisit is None:
+                self._associate(keyframe)  # 3.5
+            self._close_loop(keyframe, closures, cells, revisit)  # 3.6 loop links
         self.experience_map.correct()  # 3.6: relaxation (eq. 18)
         pose = self.experience_map.current_pose(odometry)
         anchor, anchor_from_robot = self.experience_map.anchor(odometry)
-        self.object_map.add(pose, frame.observations, anchor, anchor_from_robot)
+        self.object_map.refresh(self.experience_map.graph.poses)  # objects follow the corrected map
+        self.object_map.add(pose, frame.observations, anchor, anchor_from_robot, self.keyframes.odometer_m)
         self._record(frame, pose)
         return pose
 
@@ -124,58 +140,120 @@ class NeoSLAM:
             self._object_vector_batch.clear()
 
     def _associate(self, keyframe: Keyframe) -> None:
-        """Eq. 14: tie the keyframe's template activity O^k to the current grid x head-direction activity."""
+        """Eq. 14: tie the keyframe's template activity O^k to the current grid x head-direction activity.
+
+        Until the OVCN has learnt its first epoch its output means nothing, and it was negative for the first
+        keyframes of the simulated KITTI drives (none of the 19 before the first epoch of 05 was stored): the
+        start of a route, where a drive so often comes back, could never be recalled. Keyframes made before then
+        keep their cell activity and are associated as soon as the OVCN has learnt."""
+        if not self.object_vector_cells.loss_history:
+            self._unassociated.append((keyframe, self.grid_cells.activity.copy(), self.head_direction.activity.copy()))
+            return
+        for waiting, grid, heading in self._unassociated:
+            self._store_association(waiting, grid, heading)
+        self._unassociated.clear()
+        self._store_association(keyframe, self.grid_cells.activity, self.head_direction.activity)
+
+    def _store_association(self, keyframe: Keyframe, grid: np.ndarray, heading: np.ndarray) -> None:
         activity = self.object_vector_cells.template_activity(*object_vectors(keyframe.pose, keyframe.centers))
         if activity > 0:  # a silent template stores nothing (eq. 14 with O^k <= 0)
-            self.hebbian.associate(keyframe.id, activity, self.grid_cells.activity, self.head_direction.activity)
+            self.hebbian.associate(keyframe.id, activity, grid, heading)
 
-    def _close_loop(self, keyframe: Keyframe, cells: CellState) -> None:
-        """Closures the detector accepts go to the experience map, which checks them against the cells; an
-        accepted one recalls the place's cell state from the Hebbian memory (local-view calibration)."""
-        odometer = self.keyframes.odometer_m
-        for closure in self.loop_detector.query(keyframe, odometer):
+    def _close_loop(
+        self, keyframe: Keyframe, closures: list[LoopClosure], cells: CellState, revisit: Revisit | None
+    ) -> None:
+        """Closures the detector accepted go to the experience map, which checks them against the cells (the
+        keyframe's own closure, when it recognised a stored keyframe, was taken already as the revisit); each then
+        recalls the place's cell state from the Hebbian memory (local-view calibration): every closure the detector
+        accepted (NeuroSLAM: a re-seen view calibrates the cells whatever the map does with it), or with
+        hebbian.recall_on = accepted only those the check accepted (the paper's order). A closure is checked
+        against the cells as they are, after the recalls of the closures before it. A keyframe that is a stored
+        one seen again is not stored again."""
+        self._query_poses[keyframe.id] = keyframe.pose
+        for old in [k for k in self._query_poses if k < keyframe.id - self.config.matching.consecutive]:
+            del self._query_poses[old]  # the detector emits closures of the last `consecutive` keyframes only
+        every = self.config.hebbian.recall_on == "detected"
+        for closure in closures:
             self.detected_closures.append(closure)
-            if self.experience_map.close_loop(closure, cells):
+            taken = revisit is not None and closure is revisit.closure
+            accepted = taken or self.experience_map.close_loop(closure, self._cell_state())
+            if accepted:
                 self.loop_closures.append(closure)
-                self._recall(closure)
-        self.loop_detector.add(keyframe, odometer)
+            if accepted or every:
+                self._recall(closure, keyframe)
+        if revisit is None:
+            self.loop_detector.add(keyframe, self.keyframes.odometer_m)
 
-    def _recall(self, closure: LoopClosure) -> None:
-        """Inject the stored keyframe's cell pattern, moved by the closure's offset (the robot is near, not at, the
-        stored place, and may face the other way)."""
+    def _recall(self, closure: LoopClosure, keyframe: Keyframe) -> None:
+        """Re-anchor the cells at the recognised place: inject the stored keyframe's cell pattern where the robot
+        is now, in the cells' own frame, with `recall_gain` times the cells' injection energy.
+
+        The closure's fit puts its query keyframe in the stored keyframe's frame and the odometry since moves that
+        to the current keyframe (a closure can confirm an earlier keyframe). The stored head direction, not the
+        odometry's heading there, turns the offset into the cells' frame (after a recall the two differ by the
+        drift), and the pattern moves by fractional cells with the path integration's shift blend (a cell is 8 m
+        and 10 degrees)."""
         if closure.match_keyframe not in self.hebbian:
             return
         recall = self.hebbian.recall(closure.match_keyframe)
         if recall.strength <= 0:
             return
-        stored_pose = self.loop_detector.index.keyframes[closure.match_keyframe].pose
-        offset_world = stored_pose[:3, :3] @ closure.relative_pose[:3, 3]
-        shift = np.round(offset_world / self.grid_cells.cell_size_m).astype(int)
-        gc_cells = (recall.gc_cells + shift) % np.asarray(self.grid_cells.dims)
-        self.grid_cells.inject_pattern(gc_cells, recall.gc_weights)
-        turn = float(np.arctan2(closure.relative_pose[1, 0], closure.relative_pose[0, 0]))
-        ring = self.config.head_direction.cells
-        hd_cells = (recall.hd_indices + int(round(turn / (2 * np.pi / ring)))) % ring
-        self.head_direction.inject_pattern(hd_cells, recall.hd_weights)
+        stored = self.loop_detector.index.keyframes[closure.match_keyframe]
+        robot = closure.relative_pose @ invert_pose(self._query_poses[closure.query_keyframe]) @ keyframe.pose
+        ring = self.head_direction.cells
+        heading = circular_mean(recall.hd_indices, recall.hd_weights, ring) * self.head_direction.cell_angle
+        c, s = np.cos(heading), np.sin(heading)
+        x, y, _ = robot[:3, 3]
+        offset = np.array([c * x - s * y, s * x + c * y, (stored.pose[:3, :3] @ robot[:3, 3])[2]])
+        gain = self.config.hebbian.recall_gain
+        grid = self.config.grid_cells
+        shift = offset / self.grid_cells.cell_size_m
+        gc_cells, gc_weights = _moved_pattern(
+            recall.gc_cells, recall.gc_weights, self.grid_cells.dims, shift, grid.shift_kernel
+        )
+        self.grid_cells.inject_pattern(gc_cells, gc_weights, gain * grid.injection_energy)
+        turn = float(np.arctan2(robot[1, 0], robot[0, 0])) / self.head_direction.cell_angle
+        hd = self.config.head_direction
+        hd_cells, hd_weights = _moved_pattern(
+            recall.hd_indices[:, None], recall.hd_weights, (ring,), np.array([turn]), hd.shift_kernel
+        )
+        self.head_direction.inject_pattern(hd_cells[:, 0], hd_weights, gain * hd.injection_energy)
 
     def _record(self, frame: Frame, pose: np.ndarray) -> None:
-        self._timestamps.append(frame.timestamp)
-        self._odometry.append(frame.odometry_pose)
-        self._estimate.append(pose)
-        self._cell_states.append(np.append(self._grid_position, self.head_direction.heading))
+        if self._recorded == FRAMES_PER_CHUNK * len(self._chunks):
+            self._chunks.append(np.zeros((FRAMES_PER_CHUNK, RECORD_WIDTH)))
+        row = self._chunks[-1][self._recorded % FRAMES_PER_CHUNK]
+        row[0] = frame.timestamp
+        row[1:13] = frame.odometry_pose[:3].ravel()
+        row[13:25] = pose[:3].ravel()
+        row[25:28] = self._grid_position
+        row[28] = self.head_direction.heading
+        self._recorded += 1
+
+    def _record_columns(self, columns: slice) -> np.ndarray:
+        if not self._chunks:
+            return np.zeros((0, RECORD_WIDTH))[:, columns]
+        return np.concatenate(self._chunks)[: self._recorded, columns]
+
+    def _recorded_poses(self, columns: slice) -> np.ndarray:
+        poses = np.tile(np.eye(4), (self._recorded, 1, 1))
+        poses[:, :3] = self._record_columns(columns).reshape(-1, 3, 4)
+        return poses
 
     def result(self, frame_times_s: np.ndarray) -> RunResult:
-        stamps = np.asarray(self._timestamps)
+        self.experience_map.finish()  # links still waiting for the pose graph
+        self.object_map.refresh(self.experience_map.graph.poses, force=True)  # the last merges, on the final map
+        stamps = self._record_columns(slice(0, 1))[:, 0]
         stored = self.loop_detector.index.keyframes
         recognised = min((c.match_keyframe for c in self.loop_closures), default=None)
         empty = (np.empty(0), np.empty(0))
-        odometry = np.asarray(self._odometry).reshape(-1, 4, 4)
+        odometry = self._recorded_poses(slice(1, 13))
         return RunResult(
             estimate=self.experience_map.trajectory(stamps, odometry),
-            online_estimate=Trajectory(stamps, np.asarray(self._estimate).reshape(-1, 4, 4)),
+            online_estimate=Trajectory(stamps, self._recorded_poses(slice(13, 25))),
             odometry=Trajectory(stamps, odometry),
             experience_map=self.experience_map,
-            cell_states=np.asarray(self._cell_states).reshape(-1, 4),
+            cell_states=self._record_columns(slice(25, 29)),
             objects=self.object_map.objects(self.experience_map.graph.poses),
             keyframes=list(stored),
             loop_closures=list(self.loop_closures),
@@ -184,15 +262,40 @@ class NeoSLAM:
             object_vector_cells=self.object_vector_cells,
             hebbian=self.hebbian,
             frame_times_s=frame_times_s,
+            keyframe_frames=np.asarray(self.keyframes.frames, dtype=int),
         )
 
 
-def run(frames: Iterable[Frame], config: NeoSLAMConfig, total: int | None = None, progress: bool = True) -> RunResult:
-    """Drive NeoSLAM over frames; wall time per frame is recorded for the timing block of metrics.json."""
+def _moved_pattern(
+    cells: np.ndarray, weights: np.ndarray, dims: tuple[int, ...], offset: np.ndarray, kernel: ShiftKernel
+) -> tuple[np.ndarray, np.ndarray]:
+    """A sparse pattern (integer cells (k, d), weights (k,)) moved by `offset` cells per axis, fractional, on the
+    torus `dims`: the blend of integer shifts that path integration uses. Returns its non-zero cells and weights."""
+    dense = np.zeros(dims)
+    np.add.at(dense, tuple((np.asarray(cells) % np.asarray(dims)).T), weights)
+    moved = circular_shift(dense, [offset], kernel)
+    where = np.argwhere(moved > 0)
+    return where, moved[tuple(where.T)]
+
+
+StepObserver = Callable[["NeoSLAM", Frame, np.ndarray], None]
+
+
+def run(
+    frames: Iterable[Frame],
+    config: NeoSLAMConfig,
+    total: int | None = None,
+    progress: bool = True,
+    on_step: StepObserver | None = None,
+) -> RunResult:
+    """Drive NeoSLAM over frames; wall time per frame is recorded for the timing block of metrics.json.
+    `on_step(slam, frame, pose)` is called after each step (a live view); its time is not counted as the step's."""
     slam = NeoSLAM(config)
     times = []
     for frame in tqdm(frames, total=total, desc="neoslam", unit="frame", disable=not progress):
         start = time.perf_counter()
-        slam.step(frame)
+        pose = slam.step(frame)
         times.append(time.perf_counter() - start)
+        if on_step is not None:
+            on_step(slam, frame, pose)
     return slam.result(np.asarray(times))

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import time
 
 import numpy as np
 import pytest
@@ -286,3 +287,27 @@ def test_kitti_path_integration_follows_the_odometry(kitti_poses):
     assert np.linalg.norm(decoded * grid.cell_size_m - odometry) < 0.5
     assert np.linalg.norm(decoded * grid.cell_size_m - (position[-1] - position[0])) < 2.0
     assert abs(wrap_angle(head.heading - yaw[-1])) < math.radians(1.0)
+
+
+@pytest.mark.parametrize("turns", [1, 10**6, 10**12])
+def test_a_displacement_of_many_turns_is_quick_and_lands_modulo_the_torus(turns: int):
+    """A step of `turns` times around the torus plus 5 cells costs what a short step does (the shift kernel is
+    built for the displacement modulo the torus, not as long as the displacement) and moves the packet 5 cells."""
+    grid = GridCells()
+    for _ in range(WARM_UP_FRAMES):
+        grid.settle()
+    before = grid.centre
+    cells = turns * grid.dims[0] + 5
+    start = time.perf_counter()
+    grid.step(cells * grid.config.metres_per_cell, 0.0, 0.0)
+    assert time.perf_counter() - start < 0.5
+    assert circular_difference(grid.centre, before, grid.dims) == pytest.approx([5.0, 0.0, 0.0], abs=0.05)
+
+
+def test_a_huge_displacement_along_every_axis_stays_bounded():
+    grid = GridCells()
+    start = time.perf_counter()
+    grid.path_integrate(1e300, 0.3, -1e300)
+    grid.step(1e300, 2.0, 1e300)
+    assert time.perf_counter() - start < 0.5
+    assert np.isfinite(grid.activity).all() and grid.activity.sum() == pytest.approx(1.0, abs=1e-5)

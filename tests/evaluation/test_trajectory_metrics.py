@@ -1,9 +1,14 @@
-"""ATE / RPE / association cross-checked with evo on real KITTI ground truth, plus known-answer tests."""
+"""ATE / RPE / association cross-checked with evo on real KITTI ground truth, plus known-answer tests.
+
+Only the comparisons need evo (a test dependency): without it they skip, and fail under NEOSLAM_REQUIRE_DATA=1 (CI),
+where a missing oracle must not pass silently; the known-answer tests run either way."""
 
 from __future__ import annotations
 
 import copy
+import os
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -19,12 +24,10 @@ from neoslam.evaluation import (
 from neoslam.geometry import make_pose
 from neoslam.types import Trajectory
 
-evo_metrics = pytest.importorskip("evo.core.metrics")
-evo_sync = pytest.importorskip("evo.core.sync")
-evo_trajectory = pytest.importorskip("evo.core.trajectory")
-
 FRAME_PERIOD_S = 0.1
-RELATIVE_AGREEMENT = 1e-6
+# The README's claim: better than 1e-12 relative (measured: statistics within 2.4e-13, each error within 5e-13).
+RELATIVE_AGREEMENT = 1e-12
+ABSOLUTE_AGREEMENT = 1e-12  # m or degrees, for errors near zero (one-frame RPE)
 STEP_NOISE_M = 0.03
 STEP_NOISE_RAD = 2e-3
 STATISTICS = ("rmse", "mean", "median", "max")
@@ -58,6 +61,19 @@ def noisy_estimate(gt: np.ndarray, seed: int) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
+def evo() -> SimpleNamespace:
+    """evo's metrics, sync and trajectory modules: the oracle of the comparisons."""
+    try:
+        from evo.core import metrics, sync, trajectory
+    except ImportError as error:
+        reason = f"evo is not importable ({error}): the comparisons with evo cannot run"
+        if os.environ.get("NEOSLAM_REQUIRE_DATA") == "1":
+            pytest.fail(reason)
+        pytest.skip(reason)
+    return SimpleNamespace(metrics=metrics, sync=sync, trajectory=trajectory)
+
+
+@pytest.fixture(scope="module")
 def kitti_pair(kitti_poses):
     cache: dict[str, tuple[Trajectory, Trajectory]] = {}
 
@@ -70,43 +86,43 @@ def kitti_pair(kitti_poses):
     return _pair
 
 
-def to_evo(traj: Trajectory):
-    return evo_trajectory.PoseTrajectory3D(poses_se3=list(traj.poses), timestamps=traj.timestamps.copy())
+def to_evo(evo: SimpleNamespace, traj: Trajectory):
+    return evo.trajectory.PoseTrajectory3D(poses_se3=list(traj.poses), timestamps=traj.timestamps.copy())
 
 
-def assert_agrees(ours, evo_metric) -> None:
+def assert_agrees(evo: SimpleNamespace, ours, evo_metric) -> None:
     for name in STATISTICS:
-        expected = evo_metric.get_statistic(evo_metrics.StatisticsType(name))
-        assert getattr(ours, name) == pytest.approx(expected, rel=RELATIVE_AGREEMENT), name
-    np.testing.assert_allclose(ours.errors, evo_metric.error, rtol=RELATIVE_AGREEMENT, atol=1e-12)
+        expected = evo_metric.get_statistic(evo.metrics.StatisticsType(name))
+        assert getattr(ours, name) == pytest.approx(expected, rel=RELATIVE_AGREEMENT, abs=0), name
+    np.testing.assert_allclose(ours.errors, evo_metric.error, rtol=RELATIVE_AGREEMENT, atol=ABSOLUTE_AGREEMENT)
 
 
 @pytest.mark.parametrize("sequence", ["05", "00"])
 @pytest.mark.parametrize("mode", ["se3", "sim3", "none"])
-def test_ate_matches_evo(kitti_pair, sequence, mode):
+def test_ate_matches_evo(evo, kitti_pair, sequence, mode):
     est, ref = kitti_pair(sequence)
-    evo_est, evo_ref = to_evo(est), to_evo(ref)
+    evo_est, evo_ref = to_evo(evo, est), to_evo(evo, ref)
     if mode != "none":
         evo_est.align(evo_ref, correct_scale=mode == "sim3")
-    ape = evo_metrics.APE(evo_metrics.PoseRelation.translation_part)
+    ape = evo.metrics.APE(evo.metrics.PoseRelation.translation_part)
     ape.process_data((evo_ref, evo_est))
-    assert_agrees(absolute_trajectory_error(est, ref, align=mode), ape)
+    assert_agrees(evo, absolute_trajectory_error(est, ref, align=mode), ape)
 
 
 @pytest.mark.parametrize("sequence", ["05", "00"])
 @pytest.mark.parametrize(("delta", "unit"), [(1, "frames"), (10, "frames"), (100.0, "m")])
-def test_rpe_matches_evo(kitti_pair, sequence, delta, unit):
+def test_rpe_matches_evo(evo, kitti_pair, sequence, delta, unit):
     est, ref = kitti_pair(sequence)
     ours = relative_pose_error(est, ref, delta=delta, unit=unit)
-    evo_unit = evo_metrics.Unit.frames if unit == "frames" else evo_metrics.Unit.meters
+    evo_unit = evo.metrics.Unit.frames if unit == "frames" else evo.metrics.Unit.meters
     for relation, stats in [
-        (evo_metrics.PoseRelation.translation_part, ours.translation),
-        (evo_metrics.PoseRelation.rotation_angle_deg, ours.rotation),
+        (evo.metrics.PoseRelation.translation_part, ours.translation),
+        (evo.metrics.PoseRelation.rotation_angle_deg, ours.rotation),
     ]:
-        rpe = evo_metrics.RPE(relation, delta, evo_unit, all_pairs=False, pairs_from_reference=True)
-        rpe.process_data((to_evo(ref), to_evo(est)))
+        rpe = evo.metrics.RPE(relation, delta, evo_unit, all_pairs=False, pairs_from_reference=True)
+        rpe.process_data((to_evo(evo, ref), to_evo(evo, est)))
         assert len(stats.errors) == len(rpe.error)
-        assert_agrees(stats, rpe)
+        assert_agrees(evo, stats, rpe)
 
 
 def jittered_stamps(rng, n: int, period: float, jitter: float, keep: float) -> np.ndarray:
@@ -118,7 +134,7 @@ def jittered_stamps(rng, n: int, period: float, jitter: float, keep: float) -> n
     ("est_period", "offset"),
     [(FRAME_PERIOD_S, 0.0), (FRAME_PERIOD_S / 2, 0.0), (FRAME_PERIOD_S, 0.3), (FRAME_PERIOD_S / 2, -0.2)],
 )
-def test_associate_matches_evo(est_period, offset):
+def test_associate_matches_evo(evo, est_period, offset):
     rng = np.random.default_rng(7)
     ref_stamps = 1000.0 + jittered_stamps(rng, 400, FRAME_PERIOD_S, 0.002, keep=0.9)
     est_stamps = 1000.0 - offset + jittered_stamps(rng, int(40 / est_period), est_period, 0.008, keep=0.8)
@@ -126,7 +142,9 @@ def test_associate_matches_evo(est_period, offset):
     est = Trajectory(est_stamps, np.tile(np.eye(4), (len(est_stamps), 1, 1)))
     ref.poses[:, 0, 3] = np.arange(len(ref))
     est.poses[:, 0, 3] = np.arange(len(est))
-    evo_ref, evo_est = evo_sync.associate_trajectories(to_evo(ref), to_evo(est), max_diff=0.01, offset_2=offset)
+    evo_ref, evo_est = evo.sync.associate_trajectories(
+        to_evo(evo, ref), to_evo(evo, est), max_diff=0.01, offset_2=offset
+    )
     est_sync, ref_sync = associate(est, ref, max_time_diff=0.01, offset=offset)
     assert 0 < len(est_sync) < min(len(est), len(ref))
     np.testing.assert_array_equal(est_sync.timestamps, evo_est.timestamps)
@@ -228,6 +246,28 @@ def test_kitti_drift_known_answer_on_a_straight_line():
         assert t_err == pytest.approx(2.0 * (length + 1) / length)
     # segment of 100 m from frame 0 ends at frame 101 (first distance strictly beyond 100 m), as the devkit
     assert drift.first_frames[0] == 0
+
+
+@pytest.mark.parametrize("yaw_error_deg_per_m", [0.01, -0.03])
+def test_kitti_rotational_drift_of_a_constant_yaw_rate_error_on_a_straight_line(yaw_error_deg_per_m: float):
+    """The estimate drives the same 1 m steps but turns by a constant extra yaw each step (a yaw-rate bias): over a
+    segment of L m, which ends L + 1 frames on (the first frame beyond L m), its rotation error is (L + 1) times the
+    step's, the devkit's r_err = angle / L, reported per 100 m."""
+    ref = straight_line(1000)
+    turn = make_pose(Rotation.from_euler("z", yaw_error_deg_per_m, degrees=True), np.zeros(3))
+    steps = np.linalg.inv(ref.poses[:-1]) @ ref.poses[1:]
+    est = [ref.poses[0]]
+    for step in steps:
+        est.append(est[-1] @ step @ turn)
+    drift = kitti_drift(Trajectory(ref.timestamps, np.stack(est)), ref)
+    per_100m = abs(yaw_error_deg_per_m) * 100.0
+    for length, (t_err, r_err) in drift.per_length.items():
+        assert r_err == pytest.approx(per_100m * (length + 1) / length, rel=1e-9), length
+        assert t_err > 0.0
+    np.testing.assert_allclose(
+        drift.rotation_errors_deg_per_100m, per_100m * (drift.lengths + 1) / drift.lengths, rtol=1e-9
+    )
+    assert drift.rotation_deg_per_100m == pytest.approx(np.mean(per_100m * (drift.lengths + 1) / drift.lengths))
 
 
 def test_kitti_drift_of_a_short_trajectory_is_nan():

@@ -103,3 +103,23 @@ def test_growing_past_the_initial_capacity_keeps_every_keyframe(make_keyframe) -
         assert i in index.eligible(position, 5.0 * i + CONFIG.exclude_recent_distance)
         assert i not in index.eligible(position, 5.0 * i + CONFIG.exclude_recent_distance - 1)
         assert index.candidates(index.keyframes[i], 5.0 * i + 1e6)[0] == i
+
+
+def test_stored_keyframes_are_named_by_id_when_ids_skip(make_keyframe) -> None:
+    """Keyframes recognised as stored ones are not stored (lifelong mapping): the stored ids skip, and every answer
+    of the index names keyframes by id, not by position."""
+    rng = np.random.default_rng(4)
+    ids = [0, 1, 2, 7, 8, 30, 31, 300]
+    index = KeyframeIndex(CONFIG)
+    for k, keyframe_id in enumerate(ids):
+        index.add(_random_keyframe(make_keyframe, rng, position=(20.0 * k, 0.0), id=keyframe_id), 10.0 * k)
+    assert len(index) == len(ids) and [k.id for k in index.keyframes] == ids
+    assert 30 in index.keyframes and 3 not in index.keyframes and index.keyframes[30].id == 30
+    now = 10.0 * len(ids) + CONFIG.exclude_recent_distance
+    assert set(index.eligible(np.array([100.0, 0.0, 0.0]), now)) <= set(ids)
+    assert index.nearest(np.array([101.0, 0.0, 0.0]), np.array(ids)) == 30  # stored fifth, at x = 100
+    assert index.odometer(30) == 50.0
+    for keyframe in index.keyframes:
+        assert index.candidates(keyframe, 1e6)[0] == keyframe.id
+    with pytest.raises(ValueError, match="ids must increase"):
+        index.add(_random_keyframe(make_keyframe, rng, id=5), now)

@@ -412,3 +412,29 @@ def test_a_street_that_shares_only_part_of_the_layout_is_not_a_place(make_keyfra
     assert contradictions(query, stored, lenient.transform, CONFIG) == 6
     assert not match_keyframes(query, stored, CONFIG, E_MAX).verified
     assert match_keyframes(query, stored, CONFIG.model_copy(update={"max_contradictions": 6}), E_MAX).verified
+
+
+def test_a_match_without_distance_consistent_support_is_left_out_before_the_fit(make_keyframe, monkeypatch) -> None:
+    """Four cars keep their distances; the truck keeps its distance to car 0 only (the query has it elsewhere on a
+    circle round car 0). Spectral matching takes the truck pair (one consistent partner gives it weight), but
+    with one partner, fewer than min_support (2), verification drops it: the fit and the pairs hold the cars."""
+    cars = [[0.0, 0.0, 0.5], [7.0, 5.0, 0.5], [13.0, -4.0, 0.5], [20.0, 6.0, 0.5]]
+    truck = [-8.0, 0.0, 0.5]
+    moved_truck = [8.0 * np.cos(np.radians(15.0)), 8.0 * np.sin(np.radians(15.0)), 0.5]  # 8 m from car 0 too
+    stored = make_keyframe([*cars, truck], ["car"] * 4 + ["truck"])
+    query = make_keyframe([*cars, moved_truck], ["car"] * 4 + ["truck"])
+    to_cars, moved_to_cars = (np.linalg.norm(np.array(cars)[1:] - [t], axis=1) for t in (truck, moved_truck))
+    assert np.abs(to_cars - moved_to_cars).min() > 5 * E_MAX  # consistent with car 0 only
+    candidates = candidate_assignments(query, stored, TOLERANT)
+    chosen = spectral_matching(affinity_matrix(query, stored, candidates, E_MAX), candidates, TOLERANT)
+    assert [4, 4] in candidates[chosen].tolist()  # the truck pair is chosen ...
+    fits = []
+
+    def counted_fit(query_points, stored_points):
+        fits.append(len(query_points))
+        return fit_yaw_translation(query_points, stored_points)
+
+    monkeypatch.setattr("neoslam.loop.matching.fit_yaw_translation", counted_fit)
+    match = match_keyframes(query, stored, TOLERANT, E_MAX)
+    assert fits == [4]  # ... and never reaches the fit
+    assert match.verified and sorted(match.pairs.tolist()) == [[0, 0], [1, 1], [2, 2], [3, 3]]

@@ -392,3 +392,149 @@ def test_corrected_points_move_with_their_experience() -> None:
 def test_trajectory_of_an_empty_map_is_empty() -> None:
     trajectory = new_map().trajectory(np.zeros(0), np.zeros((0, 4, 4)))
     assert len(trajectory) == 0
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Lifelong mapping: a street driven again re-enters its experiences instead of adding copies (reuse_places)
+
+
+def drive_laps(experience_map: ExperienceMap, truth: np.ndarray, odometry: np.ndarray, lap: int) -> list[tuple]:
+    """Keyframes every KEYFRAME_EVERY frames (ids counting on over the laps); from the second lap on, each keyframe's
+    own closure recognises the keyframe of the first lap at that place, with the true relative pose: a revisit where
+    the map agrees, else (as the pipeline does) a new keyframe whose closure corrects the map. The map is corrected
+    every frame; returns (experiences, links) at the end of each lap."""
+    per_lap = lap // KEYFRAME_EVERY
+    sizes = []
+    for frame, odometry_pose in enumerate(odometry):
+        travelled = 0.0 if frame == 0 else float(np.linalg.norm(odometry_pose[:3, 3] - odometry[frame - 1][:3, 3]))
+        keyframe = frame // KEYFRAME_EVERY if frame % KEYFRAME_EVERY == 0 else None
+        revisit, closures = None, []
+        if keyframe is not None and keyframe >= per_lap:
+            stored = keyframe % per_lap
+            closures = [closure(keyframe, stored, relative_pose(truth[KEYFRAME_EVERY * stored], truth[frame]))]
+            revisit = experience_map.recognise(keyframe, closures, cells(), odometry_pose)
+            assert revisit is None or revisit.keyframe == stored
+        experience_map.step(frame, odometry_pose, VELOCITIES, cells(), travelled, keyframe, revisit)
+        if closures and revisit is None:
+            assert experience_map.close_loop(closures[0], cells())
+        experience_map.correct()
+        if (frame + 1) % lap == 0:
+            sizes.append((len(experience_map.experiences), len(experience_map.graph.links)))
+    return sizes
+
+
+@pytest.mark.parametrize("backend", ["pose-graph", "relaxation"])
+def test_a_lap_driven_again_reenters_the_experiences_of_the_first(biased_square, backend: str) -> None:
+    """Lap 1 drifts (11 degrees of yaw bias a lap): the first closures of lap 2 find the map off and correct it
+    (new experiences with loop links, as the paper); once the map agrees, lap 2 re-enters lap 1's experiences, each
+    the first time with a loop link from the one before (the street measured a second time), and the later laps add
+    nothing but, once, a link between experiences not moved between before (lap 2 ended in lap 1's last experience,
+    and lap 3 moves on from it to the first)."""
+    truth = biased_square.truth(laps=4)
+    odometry = biased_square.dead_reckoned(truth)
+    experience_map = new_map(backend=backend)
+    sizes = drive_laps(experience_map, truth, odometry, biased_square.lap)
+
+    per_lap = biased_square.lap // KEYFRAME_EVERY
+    (first, first_links), (second, second_links), (third, third_links), fourth = sizes
+    assert first == per_lap and first_links == per_lap - 1
+    assert per_lap < second <= per_lap + 5  # the closures that corrected the map
+    assert third == second and third_links - second_links <= 1  # the third lap re-enters only
+    assert fourth == (third, third_links)
+    links = [(k.source, k.target, k.kind) for k in experience_map.graph.links]
+    assert links[: per_lap - 1] == [(i, i + 1, "odometry") for i in range(per_lap - 1)]
+    loops = [link for link in links if link[2] == "loop"]
+    assert per_lap - 2 <= len(loops) <= per_lap + 2 * (second - per_lap) + 1
+    assert len(experience_map.accepted_closures) == 3 * per_lap
+    trajectory = experience_map.trajectory(np.arange(len(truth), dtype=float), odometry)
+    later = slice(biased_square.lap, None)
+    assert ate(trajectory.poses[later], truth[later]) < 0.2 * ate(odometry[later], truth[later])
+    # within a visit the trajectory follows the odometry; the last frame's online pose is the trajectory's
+    np.testing.assert_allclose(experience_map.current_pose(odometry[-1]), trajectory.poses[-1], atol=1e-9)
+
+
+def test_a_closure_is_a_revisit_only_where_the_cells_heading_and_map_agree(biased_square) -> None:
+    truth = biased_square.truth()
+    odometry = biased_square.dead_reckoned(truth)
+    experience_map = new_map()
+    drive(experience_map, odometry[:50])
+    # where the map has the robot (frame 48) seen from keyframe 8's experience (made at frame 40, on the same side)
+    in_map = invert_pose(experience_map.graph.poses[8]) @ experience_map.current_pose(odometry[48])
+    agreeing = closure(10, 8, in_map @ pose(0.02, (0.5, -0.5, 0.0)))
+    assert experience_map.recognise(10, [agreeing], cells(), odometry[48]).keyframe == 8
+    assert experience_map.recognise(10, [agreeing], cells((8, 0, 0)), odometry[48]) is None  # cells 8 bins off
+    off = closure(10, 8, in_map @ pose(0.0, (1.5, 1.5, 0.0)))  # 2.1 m from where the map has the robot
+    assert experience_map.recognise(10, [off], cells(), odometry[48]) is None
+    higher = closure(10, 8, in_map @ pose(0.0, (0.0, 0.0, 3.0)))  # height does not count: a closure's is rough
+    assert experience_map.recognise(10, [higher], cells(), odometry[48]) is not None
+    turned_map = closure(10, 8, in_map @ pose(np.radians(4.0)))  # turned 4 degrees from the map
+    assert experience_map.recognise(10, [turned_map], cells(), odometry[48]) is None
+    # a stored keyframe seen the other way is another experience, even where the map agrees
+    backwards = new_map(reentry_yaw_deg=180.0)
+    drive(backwards, odometry[:50])
+    turned = closure(10, 8, in_map @ pose(np.radians(60.0)))  # beyond reuse_max_turn_deg (45)
+    assert backwards.recognise(10, [turned], cells(), odometry[48]) is None
+    assert new_map(reuse_places=False).recognise(10, [agreeing], cells(), odometry[48]) is None
+
+
+def test_while_localised_a_keyframe_at_a_stored_one_is_a_revisit_without_a_closure(biased_square) -> None:
+    truth = biased_square.truth(laps=2)
+    odometry = biased_square.dead_reckoned(truth)
+    experience_map = new_map(localised_distance=8.0)
+    per_lap = biased_square.lap // KEYFRAME_EVERY
+    drive(experience_map, odometry[: biased_square.lap])
+    assert experience_map.recognise(per_lap, [], cells(), odometry[biased_square.lap]) is None  # not localised
+    # a closure at the first keyframe of lap 2 finds the map off (lap 1 drifted): a new experience and a loop
+    # link correct it ...
+    frame = biased_square.lap
+    first = closure(per_lap, 0, relative_pose(truth[0], truth[frame]))
+    assert experience_map.recognise(per_lap, [first], cells(), odometry[frame]) is None
+    experience_map.step(frame, odometry[frame], VELOCITIES, cells(), 1.0, per_lap)
+    assert experience_map.close_loop(first, cells())
+    for frame in range(biased_square.lap + 1, biased_square.lap + KEYFRAME_EVERY):
+        experience_map.step(frame, odometry[frame], VELOCITIES, cells(), 1.0, None)
+    # ... and the next keyframe, 5 m on, is found at stored keyframe 1 in the corrected map
+    frame = biased_square.lap + KEYFRAME_EVERY
+    found = experience_map.recognise(per_lap + 1, [], cells(), odometry[frame])
+    assert found is not None and found.keyframe == 1 and found.closure is None
+    np.testing.assert_allclose(found.robot_in_experience[:3, 3], 0.0, atol=0.3)  # it is where keyframe 1 was made
+    links = len(experience_map.graph.links)
+    experience_map.step(frame, odometry[frame], VELOCITIES, cells(), 1.0, per_lap + 1, found)
+    assert len(experience_map.experiences) == per_lap + 1 and experience_map.current == 1
+    assert len(experience_map.graph.links) == links  # a revisit found in the map adds no link
+    # the pose does not jump where the robot re-enters by the map
+    trajectory = experience_map.trajectory(np.arange(frame + 1.0), odometry[: frame + 1])
+    step = relative_pose(trajectory.poses[frame - 1], trajectory.poses[frame])
+    np.testing.assert_allclose(step, relative_pose(odometry[frame - 1], odometry[frame]), atol=1e-9)
+    # 8 m after the closure the robot no longer knows where it is: a new keyframe is new
+    entered = frame
+    for frame in range(entered + 1, entered + 5):
+        experience_map.step(frame, odometry[frame], VELOCITIES, cells(), 1.0, None)
+    assert experience_map.recognise(per_lap + 2, [], cells(), odometry[entered + 4]) is None
+
+
+def test_a_late_closure_of_a_merged_keyframe_links_where_it_was_merged(biased_square) -> None:
+    truth = biased_square.truth(laps=2)
+    odometry = truth  # no drift: the map agrees with every closure
+    experience_map = new_map()
+    per_lap = biased_square.lap // KEYFRAME_EVERY
+    drive(experience_map, odometry[: biased_square.lap])
+    frame = biased_square.lap
+    # the first keyframe of lap 2 is merged into stored keyframe 0 by its own closure ...
+    relative = relative_pose(truth[0], truth[frame])
+    revisit = experience_map.recognise(per_lap, [closure(per_lap, 0, relative)], cells(), odometry[frame])
+    assert revisit is not None
+    experience_map.step(frame, odometry[frame], VELOCITIES, cells(), 1.0, per_lap, revisit)
+    links = len(experience_map.graph.links)
+    assert len(experience_map.experiences) == per_lap
+    # ... a later closure naming it (against keyframe 1) relates experience 0 to experience 1: they are linked by
+    # the odometry where the closure puts them, so nothing is added, but the closure counts as accepted
+    late = closure(per_lap, 1, relative_pose(truth[KEYFRAME_EVERY], truth[frame]))
+    assert experience_map.close_loop(late, cells())
+    assert len(experience_map.graph.links) == links
+    # one that puts them 3 m further apart is news: a loop link from keyframe 1's experience to experience 0
+    off = closure(per_lap, 1, relative_pose(truth[KEYFRAME_EVERY], truth[frame]) @ pose(0.0, (3.0, 0.0, 0.0)))
+    assert experience_map.close_loop(off, cells())
+    assert [(k.source, k.target, k.kind) for k in experience_map.graph.links[links:]] == [(1, 0, "loop")]
+    # unknown keyframes are not closures of the map
+    assert not experience_map.close_loop(closure(per_lap + 7, 1, np.eye(4)), cells())

@@ -130,3 +130,149 @@ def test_a_map_corrected_as_a_whole_moves_every_object_rigidly() -> None:
     [anchored] = object_map.objects(correction @ experiences)
     [online] = object_map.objects()
     np.testing.assert_allclose(anchored.position, transform_points(correction, online.position[None])[0], atol=1e-9)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Lifelong mapping: objects seen again are recognised, and a correction merges the copies made before it
+
+
+def _seen_from(object_map: ObjectMap, experience: int, experience_pose: np.ndarray, robot: np.ndarray, points,
+               label: str = "car", odometer_m: float | None = None) -> list[int]:  # fmt: skip
+    """Observations of `points` from robot pose `robot` (world as the robot believes it), anchored at `experience`
+    whose pose in that world is `experience_pose`."""
+    observations = tuple(seen(label, robot, point) for point in points)
+    return object_map.add(robot, observations, experience, invert_pose(experience_pose) @ robot, odometer_m)
+
+
+def test_objects_seen_again_are_merged_once_the_map_is_corrected() -> None:
+    """Experience 1 was made 4 m off by drifted odometry: its view of the car is a second car until the map is
+    corrected, then the two are one, with every observation, and later views join it."""
+    object_map = ObjectMap(CONFIG)
+    experiences = np.array([pose(0.0, (0, 0, 0)), pose(0.0, (104, 0, 0))])  # experience 1 really is at (100, 0)
+    car = np.array([110.0, 3.0, 0.5])
+    first = _seen_from(object_map, 0, experiences[0], pose(0.0, (98, 0, 0)), [car, car + 0.1, car - 0.1])
+    drifted = car + [4.0, 0.0, 0.0]  # where the drifted robot places it
+    second = _seen_from(object_map, 1, experiences[1], pose(0.0, (104, 0, 0)), [drifted, drifted + 0.2, drifted])
+    assert set(first) == {0} and set(second) == {1}
+    assert len(object_map.objects(experiences)) == 2
+
+    corrected = experiences.copy()
+    corrected[1] = pose(0.0, (100, 0, 0))
+    assert object_map.refresh(corrected) == 1
+
+    [merged] = object_map.objects(corrected)
+    assert (merged.id, merged.observations) == (0, 6)  # the older object's id stays
+    np.testing.assert_allclose(merged.position, car + [0.0, 0.0, 0.0], atol=0.1)
+    assert len(object_map) == 1
+    # a later view from the corrected map joins it
+    assert _seen_from(object_map, 1, corrected[1], pose(0.0, (101, 0, 0)), [car]) == [0]
+    [again] = object_map.objects(corrected)
+    assert again.observations == 7
+
+
+def test_a_map_that_hardly_moved_is_not_refreshed() -> None:
+    object_map, experiences, _, _ = _two_experience_map()
+    assert object_map.refresh(experiences) == 0  # the first refresh computes, nothing to merge
+    nudged = experiences.copy()
+    nudged[1] = pose(0.0, (0.3, 0.0, 0.0)) @ nudged[1]
+    object_map.refresh(nudged)
+    [online] = object_map.objects()
+    [anchored] = object_map.objects(experiences)
+    np.testing.assert_allclose(online.position, anchored.position, atol=1e-9)  # not recomputed for 0.3 m
+    moved = experiences.copy()
+    moved[1] = pose(0.0, (2.0, 0.0, 0.0)) @ moved[1]
+    object_map.refresh(moved)
+    np.testing.assert_allclose(object_map.objects()[0].position, object_map.objects(moved)[0].position, atol=1e-9)
+
+
+def test_merging_takes_the_nearest_pairs_first_and_does_not_chain() -> None:
+    """Three cars 3 m apart in a row, each seen from its own experience; a correction pulls them to about 2 m apart:
+    the nearer pair merges, and the third is then 2.95 m from their mean, so it stays."""
+    object_map = ObjectMap(CONFIG)
+    experiences = np.array([pose(0.0, (3.0 * k, -10.0, 0.0)) for k in range(3)])
+    for k in range(3):
+        car = np.array([3.0 * k, 0.0, 0.5])
+        _seen_from(object_map, k, experiences[k], experiences[k], [car] * 3)
+    assert len(object_map.objects(experiences)) == 3
+    corrected = np.array([pose(0.0, (x, -10.0, 0.0)) for x in (0.0, 1.9, 3.9)])  # cars 1.9 and 2.0 m apart
+    assert object_map.refresh(corrected) == 1
+    objects = object_map.objects(corrected)
+    assert [(o.id, o.observations) for o in objects] == [(0, 6), (2, 3)]
+
+
+def test_objects_seen_too_few_times_are_forgotten() -> None:
+    config = CONFIG.model_copy(update={"tentative_distance": 50.0})
+    object_map = ObjectMap(config)
+    robot = pose(0.0, (0, 0, 0))
+    _seen_from(object_map, 0, robot, robot, [(10.0, 3.0, 0.5)], label="person", odometer_m=0.0)  # once
+    _seen_from(object_map, 0, robot, robot, [(12.0, -4.0, 0.5)] * 3, odometer_m=1.0)  # three times: confirmed
+    assert len(object_map) == 2
+    _seen_from(object_map, 0, robot, robot, [], odometer_m=40.0)
+    assert len(object_map) == 2  # not yet
+    _seen_from(object_map, 0, robot, robot, [], odometer_m=60.0)
+    assert len(object_map) == 1  # the person seen once is gone, the car stays
+    # a new sighting where the person was is a new object
+    assert _seen_from(object_map, 0, robot, robot, [(10.0, 3.0, 0.5)], label="person", odometer_m=61.0) == [2]
+    [car] = object_map.objects()
+    assert (car.id, car.label, car.observations) == (1, "car", 3)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_spatial_hash_associates_as_a_full_search(seed: int) -> None:
+    """Each observation joins the nearest object of its label inside its gate (in the ground plane the association
+    radius across the viewing ray and two depth stds along it; height_tolerance in height), as a search over all
+    objects would find it."""
+    rng = np.random.default_rng(seed)
+    config = CONFIG.model_copy(update={"min_observations": 1})
+    object_map = ObjectMap(config)
+    sums: list[np.ndarray] = []
+    weights: list[float] = []
+    labels: list[str] = []
+    radius = config.association_radius
+    for _ in range(400):
+        label = str(rng.choice(["car", "person"]))
+        point = rng.uniform([-45, -45, -2], [45, 45, 4])  # up to 64 m away: far views have wide gates
+        centre = robot_points_to_camera(point[None])[0]
+        [got] = object_map.add(np.eye(4), (ObjectObservation(label, 0.9, np.zeros(4), np.zeros(4), centre, None),))
+        sigma = max(config.depth_sigma_at_1m * centre[2] ** 2, config.position_sigma_floor)
+        along_gate = max(radius, config.gate_sigmas * sigma)
+        ray = point[:2] / np.linalg.norm(point[:2])
+        scores = []
+        for total, weight, known in zip(sums, weights, labels, strict=True):
+            offset = total / weight - point
+            along = offset[:2] @ ray
+            across = np.linalg.norm(offset[:2] - along * ray)
+            height = offset[2] / max(radius, config.height_tolerance)
+            scores.append((along / along_gate) ** 2 + (across / radius) ** 2 + height**2 if known == label else np.inf)
+        if scores and min(scores) <= 1.0:
+            expected = int(np.argmin(scores))
+        else:
+            expected = len(sums)
+            sums.append(np.zeros(3))
+            weights.append(0.0)
+            labels.append(label)
+        sums[expected] = sums[expected] + point / sigma**2
+        weights[expected] += 1.0 / sigma**2
+        assert got == expected
+
+
+def test_a_far_view_joins_an_object_along_its_ray_not_across_it() -> None:
+    """Seen 50 m away a stereo centre is metres off along the viewing ray (std 0.0015 x 50^2 = 3.75 m): a view 4 m
+    beyond a known car joins it, one 4 m beside it does not; the far view barely moves the car (inverse-variance
+    weights)."""
+    object_map = ObjectMap(CONFIG)
+    robot = np.eye(4)
+    car = np.array([50.0, 2.0, 0.5])
+    near = pose(0.0, (40.0, 0.0, 0.0))  # 10 m from the car
+    assert _seen_from(object_map, 0, robot, near, [car] * 3) == [0, 0, 0]
+    ray = (car - robot[:3, 3]) / np.linalg.norm(car - robot[:3, 3])
+    beyond = car + 4.0 * ray
+    beside = car + 4.0 * np.array([-ray[1], ray[0], 0.0])
+    assert _seen_from(object_map, 0, robot, robot, [beyond]) == [0]
+    assert _seen_from(object_map, 0, robot, robot, [beside]) == [1]
+    [known] = [o for o in object_map.objects() if o.id == 0]
+    assert known.observations == 4
+    far_sigma = CONFIG.depth_sigma_at_1m * beyond[0] ** 2  # its depth: the robot looks along x
+    near_weight, far_weight = 3 / CONFIG.position_sigma_floor**2, 1 / far_sigma**2
+    np.testing.assert_allclose(known.position, (near_weight * car + far_weight * beyond) / (near_weight + far_weight))
+    assert np.linalg.norm(known.position - car) < 0.01

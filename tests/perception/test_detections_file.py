@@ -125,7 +125,7 @@ def test_missing_and_undecodable_files(tmp_path: Path) -> None:
     assert raised.value.path == tmp_path / "absent.jsonl"
     binary = tmp_path / "binary.jsonl"
     binary.write_bytes(b"\xff\xfe\x00")
-    with pytest.raises(InputError, match="cannot read"):
+    with pytest.raises(InputError, match=r"not a text file \(not UTF-8: byte 0xff\)"):  # as every text reader says
         DetectionsFile(binary, CLASSES)
 
 

@@ -206,3 +206,16 @@ def test_boxes_scores_and_centres_agree(block_recording: SimulatedRecording) -> 
         assert 0.3 <= d.score <= 0.99
         (scores_near if truth[2] < 15 else scores_far if truth[2] > 30 else []).append(d.score)
     assert np.mean(scores_near) > np.mean(scores_far) + 0.1
+
+
+def test_patch_gain_noise_near_configured(block_recording: SimulatedRecording) -> None:
+    """Each observation's patch is its object's texture times a brightness gain 1 + N(0, patch_gain_sigma), plus
+    pixel noise: the least-squares gain of a patch against its texture spreads by patch_gain_sigma (pixel noise alone
+    would spread it by about 0.005)."""
+    gains = []
+    for _, d, _ in _true_detections(block_recording):
+        texture = block_recording.world.textures[d.object_id]
+        gains.append(float((d.patch * texture).sum() / (texture * texture).sum()))
+    assert len(gains) > 1000
+    assert np.mean(gains) == pytest.approx(1.0, abs=0.01)
+    assert np.std(gains) == pytest.approx(NOISE.patch_gain_sigma, rel=0.15)

@@ -90,3 +90,46 @@ def test_odometry_noise_does_not_change_world_or_detections(block_recording: Sim
             np.testing.assert_array_equal(a.center_camera, b.center_camera)
     assert not np.allclose(heavy.linear_velocity, block_recording.linear_velocity)
     np.testing.assert_array_equal(heavy.truth.poses, block_recording.truth.poses)
+
+
+STRAIGHT_FRAMES = 20_000  # 2 km at 10 m/s: the standard error of a mean yaw-rate error is 7e-5 rad/s with vo
+
+
+@pytest.fixture(scope="module")
+def straight() -> Trajectory:
+    """A flat straight road at 10 m/s: every velocity but the forward speed is zero, so each noise term shows alone."""
+    poses = np.tile(np.eye(4), (STRAIGHT_FRAMES, 1, 1))
+    poses[:, 0, 3] = np.arange(STRAIGHT_FRAMES) * 10.0 * CONFIG.frame_period
+    return Trajectory(np.arange(STRAIGHT_FRAMES) * CONFIG.frame_period, poses)
+
+
+@pytest.mark.parametrize("name", sorted(NOISE_PROFILES))
+def test_each_noise_term_of_each_profile(straight: Trajectory, name: str) -> None:
+    """Every term of every profile has its configured spread and its configured bias, and no other noise appears."""
+    profile = NOISE_PROFILES[name]
+    true_linear, true_angular = body_velocities(straight.poses, straight.timestamps)
+    linear, angular = noisy_odometry(straight, profile, np.random.default_rng(11))
+    terms = {  # error with the configured bias removed, configured std
+        "speed": (linear[1:, 0] - true_linear[1:, 0] * (1 + profile.speed_scale_bias), profile.sigma_speed),
+        "sideways speed": (linear[1:, 1] - true_linear[1:, 1], 0.0),
+        "vertical speed": (linear[1:, 2] - true_linear[1:, 2], profile.sigma_vertical_speed),
+        "roll rate": (angular[1:, 0] - true_angular[1:, 0], 0.0),
+        "pitch rate": (angular[1:, 1] - true_angular[1:, 1], profile.sigma_pitch_rate),
+        "yaw rate": (angular[1:, 2] - true_angular[1:, 2] - profile.yaw_rate_bias, profile.sigma_yaw_rate),
+    }
+    for term, (error, sigma) in terms.items():
+        assert np.std(error) == pytest.approx(sigma, rel=0.05, abs=1e-9), term  # 10 standard errors
+        standard_error = sigma / np.sqrt(len(error))
+        assert abs(np.mean(error)) <= 5 * standard_error + 1e-9, term  # no bias left: vo's yaw bias is 14 s.e.
+
+
+@pytest.mark.parametrize("name", sorted(NOISE_PROFILES))
+def test_yaw_rate_bias_of_each_profile_exactly(straight: Trajectory, name: str) -> None:
+    """The same draws with and without the profile's bias differ by exactly the bias, of its sign (heavy's yaw-rate
+    noise is 100 times its bias: no mean over a drive could tell the bias from none, or from its opposite)."""
+    profile = NOISE_PROFILES[name]
+    _, biased = noisy_odometry(straight, profile, np.random.default_rng(5))
+    _, unbiased = noisy_odometry(straight, profile.model_copy(update={"yaw_rate_bias": 0.0}), np.random.default_rng(5))
+    np.testing.assert_allclose(biased[1:, 2] - unbiased[1:, 2], profile.yaw_rate_bias, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(biased[1:, :2], unbiased[1:, :2])
+    assert NOISE_PROFILES["vo"].yaw_rate_bias == NOISE_PROFILES["heavy"].yaw_rate_bias == 0.001  # README's table

@@ -17,11 +17,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 import scipy.fft
 from scipy.ndimage import correlate1d
+
+from neoslam.errors import ConfigError
 
 __all__ = [
     "ShiftKernel",
@@ -29,6 +31,7 @@ __all__ = [
     "transfer_function",
     "attractor_dynamics",
     "settle_and_move",
+    "step_network",
     "shift_taps",
     "circular_shift",
     "nearest_cell",
@@ -140,6 +143,35 @@ def settle_and_move(
     return circular_shift(settled, after, kernel) if after else settled
 
 
+class _NetworkConfig(Protocol):
+    global_inhibition: float
+    shift_kernel: ShiftKernel
+    inhibition_size: int
+    inhibition_sigma: float
+
+
+def step_network(
+    section: str,
+    activity: np.ndarray,
+    transfer: np.ndarray,
+    config: _NetworkConfig,
+    packet_centre: np.ndarray | None,
+    displacement: Sequence[float] | None,
+) -> np.ndarray:
+    """`settle_and_move` with a network's config. Activity that vanishes is a ConfigError naming the values: only
+    the configuration does that (an inhibition that outweighs the excitation)."""
+    try:
+        return settle_and_move(
+            activity, transfer, config.global_inhibition, config.shift_kernel, packet_centre, displacement
+        )
+    except FloatingPointError:
+        raise ConfigError(
+            f"{section}: the attractor activity vanished, no cell survived the inhibition (global_inhibition "
+            f"{config.global_inhibition:g}, inhibition_size {config.inhibition_size}, inhibition_sigma "
+            f"{config.inhibition_sigma:g}): weaken it"
+        ) from None
+
+
 def shift_taps(displacement: float, kernel: ShiftKernel = "zero-skew") -> tuple[int, np.ndarray]:
     """First integer offset and weights of the convex blend of consecutive circular shifts that moves by
     `displacement` cells: activity' = sum_k weights[k] * roll(activity, first + k).
@@ -177,6 +209,18 @@ def _shift_factor(shape: Sequence[int], axis: int, first: int, weights: np.ndarr
     return factor.reshape(broadcast)
 
 
+def _within_one_turn(first: int, taps: int, cells: int) -> int:
+    """The first offset of a blend of `taps` consecutive shifts, moved by whole turns of the ring so that the blend
+    is centred within half a turn of zero. Rolling by n cells is rolling by n mod cells: a displacement of a
+    million cells (a huge step or a wrong value) then costs what a short one does, instead of a kernel a million
+    taps long. Displacements within half a turn are unchanged."""
+    half = (taps - 1) // 2
+    centre = (first + half) % cells  # integer arithmetic: exact for any Python int
+    if centre >= (cells + 1) // 2:
+        centre -= cells
+    return centre - half
+
+
 def _roll_kernel(first: int, weights: np.ndarray) -> np.ndarray:
     """Weights of sum_k weights[k] * roll(a, first + k) as an odd correlation kernel centred on offset 0."""
     reach = max(abs(first), abs(first + len(weights) - 1))
@@ -199,6 +243,7 @@ def circular_shift(
                 raise ValueError(f"{len(displacement)} displacements for a {activity.ndim}-D activity")
             offset, taps = shift_taps(float(displacement[axis]), kernel)
             first, weights = first + offset, np.convolve(weights, taps)
+        first = _within_one_turn(first, len(weights), activity.shape[axis])
         if len(weights) > 1 or first != 0:
             taps = _roll_kernel(first, weights.astype(activity.dtype))
             result = correlate1d(result, taps, axis=axis, mode="wrap")

@@ -26,7 +26,7 @@ from neoslam.cells.attractor import (
     nearest_cell,
     packet_centre,
     peak_cell,
-    settle_and_move,
+    step_network,
     transfer_function,
 )
 from neoslam.config import GridCellConfig
@@ -116,9 +116,6 @@ class GridCells:
         self._centre = None
 
     def _update(self, displacement: np.ndarray | None) -> None:
-        config = self.config
-        centre = self.centre if config.settle_in_packet_frame else None
-        self._activity = settle_and_move(
-            self._activity, self._transfer, config.global_inhibition, config.shift_kernel, centre, displacement
-        )
+        centre = self.centre if self.config.settle_in_packet_frame else None
+        self._activity = step_network("grid_cells", self._activity, self._transfer, self.config, centre, displacement)
         self._centre = None

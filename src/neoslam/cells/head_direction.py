@@ -22,7 +22,7 @@ from neoslam.cells.attractor import (
     nearest_cell,
     packet_centre,
     peak_cell,
-    settle_and_move,
+    step_network,
     transfer_function,
 )
 from neoslam.config import HeadDirectionConfig
@@ -115,9 +115,8 @@ class HeadDirectionCells:
         self._centre = None
 
     def _update(self, displacement: np.ndarray | None) -> None:
-        config = self.config
-        centre = np.array([self.centre]) if config.settle_in_packet_frame else None
-        self._activity = settle_and_move(
-            self._activity, self._transfer, config.global_inhibition, config.shift_kernel, centre, displacement
+        centre = np.array([self.centre]) if self.config.settle_in_packet_frame else None
+        self._activity = step_network(
+            "head_direction", self._activity, self._transfer, self.config, centre, displacement
         )
         self._centre = None

@@ -12,20 +12,28 @@ ROOT/
 
 from __future__ import annotations
 
+import os
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
+from pydantic import ValidationError
 
-from neoslam.config import CameraConfig
+from neoslam.config import CameraConfig, describe_validation_error
 from neoslam.errors import InputError
+from neoslam.io.text import read_text
 from neoslam.io.trajectory_files import read_kitti, read_times
 from neoslam.types import Trajectory
 
 __all__ = ["KittiSequence", "read_kitti_sequence", "read_calibration", "is_kitti_root", "sequences_in"]
 
 IMAGE_SUFFIX = ".png"
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+PNG_END = b"IEND\xaeB`\x82"  # the IEND chunk's type and CRC, which close every complete PNG
 PROJECTION_VALUES = 12
 # KITTI's principal points sit within a few per cent of the image centre; an image whose centre is farther from the
 # calibrated principal point than this share of its size belongs to another camera or was resized.
@@ -43,13 +51,16 @@ def sequences_in(root: Path) -> list[str]:
 
 def read_calibration(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """The left and right projection matrices P0 and P1 (3x4) of a KITTI calib.txt."""
-    if not path.is_file():
-        raise InputError(path, "calibration file not found")
     matrices: dict[str, np.ndarray] = {}
-    for number, line in enumerate(path.read_text(errors="replace").splitlines(), start=1):
+    seen_at: dict[str, int] = {}
+    for number, line in enumerate(read_text(path, missing="calibration file not found").splitlines(), start=1):
         key, _, rest = line.partition(":")
         if key.strip() not in ("P0", "P1"):
             continue
+        if key.strip() in seen_at:
+            # Which of two differing matrices is the camera's cannot be told: refuse rather than take the last.
+            raise InputError(path, f"a second {key.strip()} line (the first is line {seen_at[key.strip()]})", number)
+        seen_at[key.strip()] = number
         tokens = rest.split()
         if len(tokens) != PROJECTION_VALUES:
             raise InputError(path, f"{key.strip()} has {len(tokens)} numbers, {PROJECTION_VALUES} expected", number)
@@ -75,7 +86,10 @@ def _camera_from_projections(path: Path, left: np.ndarray, right: np.ndarray, si
     if baseline <= 0:
         raise InputError(path, f"P1 gives a non-positive stereo baseline ({baseline:.4f} m); is P1 the right camera?")
     width, height = size
-    return CameraConfig(fx=fx, fy=fy, cx=cx, cy=cy, width=width, height=height, baseline=baseline)
+    try:
+        return CameraConfig(fx=fx, fy=fy, cx=cx, cy=cy, width=width, height=height, baseline=baseline)
+    except ValidationError as error:  # e.g. a focal length of 1e300 px
+        raise InputError(path, f"P0/P1 give camera.{describe_validation_error(error)}") from None
 
 
 def _check_principal_point(image: Path, camera: CameraConfig) -> None:
@@ -89,11 +103,30 @@ def _check_principal_point(image: Path, camera: CameraConfig) -> None:
         )
 
 
+@contextmanager
+def _native_stderr_silenced() -> Iterator[None]:
+    """Nothing written to file descriptor 2 inside gets out: libpng and OpenCV print their own complaints about a
+    broken image there ("libpng error: Read Error"), before and apart from NeoSLAM's one line about it."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "wb") as devnull:
+            os.dup2(devnull.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
 def read_grey_image(path: Path) -> np.ndarray:
-    """An 8-bit grey image; one clear error when it is missing or not an image."""
+    """An 8-bit grey image; one clear error when it is missing, truncated or not an image."""
     if not path.is_file():
         raise InputError(path, "image not found")
-    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    data = path.read_bytes()
+    if data.startswith(PNG_SIGNATURE) and PNG_END not in data:
+        raise InputError(path, "truncated PNG (its closing IEND chunk is missing)")
+    with _native_stderr_silenced():
+        image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_GRAYSCALE) if data else None
     if image is None:
         raise InputError(path, "not a readable image")
     return image
@@ -148,6 +181,15 @@ class KittiSequence:
         return image
 
 
+def _ground_truth(path: Path, timestamps: np.ndarray) -> Trajectory:
+    """poses/NN.txt at the sequence's times; a pose count that differs from times.txt is the pose file's fault
+    (times.txt matched the images already)."""
+    poses = read_kitti(path).poses
+    if len(poses) != len(timestamps):
+        raise InputError(path, f"{len(poses)} poses for the {len(timestamps)} frames of times.txt")
+    return Trajectory(timestamps, poses)
+
+
 def read_kitti_sequence(root: Path, sequence: str) -> KittiSequence:
     """Check the layout of sequence NN under a KITTI odometry root and read its calibration, times and poses."""
     folder = root / "sequences" / sequence
@@ -165,5 +207,5 @@ def read_kitti_sequence(root: Path, sequence: str) -> KittiSequence:
     camera = _camera_from_projections(folder / "calib.txt", left_projection, right_projection, size)
     _check_principal_point(left[0], camera)
     poses_path = root / "poses" / f"{sequence}.txt"
-    truth = read_kitti(poses_path, times_path) if poses_path.is_file() else None
+    truth = _ground_truth(poses_path, timestamps) if poses_path.is_file() else None
     return KittiSequence(root, sequence, camera, timestamps, left, right, truth)

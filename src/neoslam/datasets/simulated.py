@@ -20,11 +20,15 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from pydantic import ValidationError
 
-from neoslam.config import CameraConfig
+from neoslam.config import CameraConfig, MotionLimitsConfig, describe_validation_error
 from neoslam.errors import InputError
 from neoslam.geometry import integrate_body_velocities
+from neoslam.io.detection_checks import box_problem, centre_problem, label_problem, score_problem
+from neoslam.io.motion_limits import check_time_steps, check_velocities
 from neoslam.io.tables import numeric_column, read_table, write_table
+from neoslam.io.text import read_text
 from neoslam.io.trajectory_files import read_tum, write_tum
 from neoslam.sim.simulator import SimulatedRecording
 from neoslam.types import Frame, ObjectObservation, Trajectory
@@ -36,6 +40,8 @@ VERSION = 1
 FRAME_COLUMNS = ("frame", "timestamp", "vx", "vy", "vz", "wx", "wy", "wz")
 BOX_COLUMNS = tuple(f"{side}_{c}" for side in ("left", "right") for c in ("x1", "y1", "x2", "y2"))
 DETECTION_COLUMNS = ("frame", "label", "score", *BOX_COLUMNS, "x", "y", "z")
+NPY_MAGIC = b"\x93NUMPY"
+ZIP_MAGIC = b"PK\x03\x04"
 OBJECT_COLUMNS = ("id", "label", "x", "y", "z", "length", "width", "height", "yaw", "vx", "vy", "vz")
 
 
@@ -124,21 +130,29 @@ def _read_meta(path: Path) -> dict:
     if not path.is_file():
         raise InputError(path, "not found: not a simulated dataset folder (made by `neoslam simulate`)")
     try:
-        meta = yaml.safe_load(path.read_text())
-    except yaml.YAMLError:
-        raise InputError(path, "not valid YAML") from None
+        meta = yaml.safe_load(read_text(path))
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        raise InputError(path, "not valid YAML", line=mark.line + 1 if mark is not None else None) from None
+    except RecursionError:
+        raise InputError(path, "not valid YAML (nested too deeply)") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise InputError(path, f"format is not {FORMAT!r}")
     if meta.get("version") != VERSION:
         raise InputError(path, f"version {meta.get('version')!r} is not supported (this NeoSLAM reads {VERSION})")
+    if "frames" not in meta:
+        raise InputError(path, "no 'frames' entry (the number of frames in frames.csv)")
+    frames = meta["frames"]
+    if not isinstance(frames, int) or isinstance(frames, bool) or frames < 1:
+        raise InputError(path, f"frames must be the number of frames in frames.csv (an integer >= 1), got {frames!r}")
     try:
         meta["camera"] = CameraConfig.model_validate(meta.get("camera", {}))
-    except ValueError as error:
-        raise InputError(path, f"camera calibration is invalid ({str(error).splitlines()[0]})") from None
+    except ValidationError as error:
+        raise InputError(path, f"camera.{describe_validation_error(error)}") from None
     return meta
 
 
-def _read_frames(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _read_frames(path: Path, limits: MotionLimitsConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     rows = read_table(path, FRAME_COLUMNS)
     if not rows:
         raise InputError(path, "no frames")
@@ -152,6 +166,9 @@ def _read_frames(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         raise InputError(path, f"timestamp {stamps[back[0] + 1]} does not increase", line=int(back[0]) + 3)
     linear = np.column_stack([values[c] for c in ("vx", "vy", "vz")])
     angular = np.column_stack([values[c] for c in ("wx", "wy", "wz")])
+    lines = np.arange(len(rows)) + 2  # after the header
+    check_time_steps(path, stamps, limits, lines)
+    check_velocities(path, linear, angular, limits, lines)
     return stamps, linear, angular
 
 
@@ -168,32 +185,67 @@ def _read_detections(folder: Path, frames: int) -> tuple[tuple[ObjectObservation
             raise InputError(path, f"frame {frame:g} is not one of the {frames} frames", line=k + 2)
         box = np.array([values[c][k] for c in BOX_COLUMNS])
         centre = np.array([values[c][k] for c in ("x", "y", "z")])
-        if centre[2] <= 0:
-            raise InputError(path, f"object centre has depth {centre[2]} m (must be in front of the camera)", k + 2)
+        problem = (
+            label_problem(row[1])
+            or score_problem(float(values["score"][k]))
+            or box_problem(box[:4].tolist(), "left box")
+            or box_problem(box[4:].tolist(), "right box")
+            or centre_problem(centre.tolist())
+        )
+        if problem is not None:
+            raise InputError(path, problem, line=k + 2)
         per_frame[int(frame)].append(
             ObjectObservation(row[1], float(values["score"][k]), box[:4], box[4:], centre, patches[k])
         )
     return tuple(tuple(observations) for observations in per_frame)
 
 
+def _npy_header(path: Path) -> tuple[tuple[int, ...], np.dtype, int]:
+    """Shape, dtype and data bytes present of a .npy file, read from its header before any data is loaded: a
+    file that is empty, a zip (.npz) or not NumPy's gets its own message, and a header whose shape the file does
+    not hold is refused before numpy allocates it."""
+    with path.open("rb") as handle:
+        magic = handle.read(len(NPY_MAGIC))
+        if not magic:
+            raise InputError(path, "empty file (0 bytes): expected a .npy array of (N, s, s) uint8 patches")
+        if magic.startswith(ZIP_MAGIC):
+            raise InputError(path, "is an .npz (zip) archive, not a .npy array (write the patches with numpy.save)")
+        if magic != NPY_MAGIC:
+            raise InputError(path, "not a .npy file (it does not start with NumPy's header)")
+        handle.seek(0)
+        try:
+            version = np.lib.format.read_magic(handle)
+            if version == (1, 0):
+                shape, _, dtype = np.lib.format.read_array_header_1_0(handle)
+            else:
+                shape, _, dtype = np.lib.format.read_array_header_2_0(handle)
+        except ValueError as error:
+            raise InputError(path, f"the .npy header is not readable ({error})") from None
+        return shape, dtype, path.stat().st_size - handle.tell()
+
+
 def _read_patches(path: Path, count: int) -> np.ndarray:
     if not path.is_file():
         raise InputError(path, "file not found")
+    shape, dtype, present = _npy_header(path)
+    if len(shape) != 3 or dtype != np.uint8 or shape[0] != count or not 0 < shape[1] == shape[2]:
+        raise InputError(path, f"expected ({count}, s, s) uint8 patches with s >= 1, found {shape} {dtype}")
+    if present < count * shape[1] * shape[2]:
+        raise InputError(path, f"truncated: {present} bytes of data for {shape} patches")
     try:
         patches = np.load(path, allow_pickle=False)
-    except (ValueError, OSError) as error:
+    except (ValueError, OSError, EOFError) as error:
         raise InputError(path, f"not a readable .npy array ({error})") from None
-    if patches.ndim != 3 or patches.dtype != np.uint8 or len(patches) != count:
-        raise InputError(path, f"expected ({count}, s, s) uint8 patches, found {patches.shape} {patches.dtype}")
     return patches
 
 
-def read_dataset(folder: Path) -> SimulatedDataset:
-    """Read a simulated dataset folder; ground truth is attached when `truth/` exists."""
+def read_dataset(folder: Path, limits: MotionLimitsConfig | None = None) -> SimulatedDataset:
+    """Read a simulated dataset folder, its motion checked against `limits` (default: the default limits); ground
+    truth is attached when `truth/` exists."""
     if not folder.is_dir():
         raise InputError(folder, "dataset folder not found")
     meta = _read_meta(folder / "dataset.yaml")
-    stamps, linear, angular = _read_frames(folder / "frames.csv")
+    stamps, linear, angular = _read_frames(folder / "frames.csv", limits or MotionLimitsConfig())
     if meta.get("frames") != len(stamps):
         raise InputError(folder / "frames.csv", f"{len(stamps)} frames, dataset.yaml says {meta.get('frames')}")
     observations = _read_detections(folder, len(stamps))

@@ -22,7 +22,8 @@ __all__ = ["trajectory_metrics", "loop_metrics", "cell_metrics", "timing_metrics
 
 
 def _finite(value: float) -> float | None:
-    return None if math.isnan(value) else round(float(value), 6)
+    # None for NaN and for inf alike: neither is JSON, and neither is a figure the data supports.
+    return round(float(value), 6) if math.isfinite(value) else None
 
 
 def trajectory_metrics(estimate: Trajectory, truth: Trajectory, config: EvaluationConfig) -> dict[str, Any]:
@@ -32,15 +33,17 @@ def trajectory_metrics(estimate: Trajectory, truth: Trajectory, config: Evaluati
     KITTI's shortest segment) is None rather than an error: a short run is not a user's mistake.
     """
     nan_stats = ErrorStats.from_errors(np.empty(0))
-    try:
-        ate = absolute_trajectory_error(estimate, truth, align=config.alignment)
-    except ValueError:
-        ate = nan_stats
-    try:
-        rpe_translation, rpe_rotation = _rpe(estimate, truth, config)
-    except ValueError:
-        rpe_translation = rpe_rotation = nan_stats
-    drift = kitti_drift(estimate, truth)
+    # Absurd but finite coordinates (1e300) overflow to inf on the way: such a figure is None, without warnings.
+    with np.errstate(over="ignore", invalid="ignore"):
+        try:
+            ate = absolute_trajectory_error(estimate, truth, align=config.alignment)
+        except (ValueError, np.linalg.LinAlgError):
+            ate = nan_stats
+        try:
+            rpe_translation, rpe_rotation = _rpe(estimate, truth, config)
+        except ValueError:
+            rpe_translation = rpe_rotation = nan_stats
+        drift = kitti_drift(estimate, truth)
     return {
         "ate_rmse_m": _finite(ate.rmse),
         "ate_max_m": _finite(ate.max),

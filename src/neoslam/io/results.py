@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from neoslam.config import NeoSLAMConfig, dump_config
+from neoslam.errors import InputError
 from neoslam.geometry import pose_from_quaternion, quaternion_from_pose
 from neoslam.io.tables import numeric_column, read_table, write_table
-from neoslam.io.trajectory_files import write_kitti, write_tum
+from neoslam.io.trajectory_files import QUATERNION_NORM_TOLERANCE, write_kitti, write_tum
 from neoslam.mapping.object_map import MapObject
 from neoslam.types import LoopClosure, Trajectory
 
@@ -101,22 +103,55 @@ def write_experience_map(path: Path, experience_map) -> None:
     path.write_text(json.dumps(payload, separators=(",", ":")) + "\n")
 
 
+def _json_ready(value: Any) -> Any:
+    """The value with every NaN or infinite float replaced by None: JSON has neither (an ATE of 1e300-metre
+    trajectories overflows to inf), and null is what a figure the data cannot support is written as."""
+    if isinstance(value, dict):
+        return {key: _json_ready(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_ready(item) for item in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 def write_metrics(path: Path, metrics: dict[str, Any]) -> None:
-    path.write_text(json.dumps(metrics, indent=2, allow_nan=False) + "\n")
+    path.write_text(json.dumps(_json_ready(metrics), indent=2, allow_nan=False) + "\n")
 
 
 def write_config(path: Path, config: NeoSLAMConfig) -> None:
     path.write_text(dump_config(config))
 
 
-def read_loop_closures(path: Path) -> list[LoopClosure]:
-    """Read loop_closures.csv back (for `neoslam evaluate --loops`)."""
+def _check_loop_row(values: dict[str, np.ndarray], k: int, frames: int | None) -> str | None:
+    """The problem of row k of loop_closures.csv, if any: counts are integers, frames lie in the trajectory,
+    the rotation is a unit quaternion."""
+    for name in ("query_frame", "match_frame", "query_keyframe", "match_keyframe", "matched_objects"):
+        value = values[name][k]
+        if value != int(value) or value < 0:
+            return f"column {name}: {value:g} is not a non-negative integer"
+    for name in ("query_frame", "match_frame"):
+        if frames is not None and values[name][k] >= frames:
+            return f"column {name}: frame {values[name][k]:g} is beyond the {frames} poses of the ground truth"
+    norm = math.hypot(*(values[c][k] for c in ("qx", "qy", "qz", "qw")))
+    if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
+        return "zero quaternion" if norm == 0 else f"non-unit quaternion (norm {norm:.3g})"
+    return None
+
+
+def read_loop_closures(path: Path, frames: int | None = None) -> list[LoopClosure]:
+    """Read loop_closures.csv back (for `neoslam evaluate --loops`); with `frames`, the length of the trajectory
+    the closures' frames index, a frame beyond it is refused with its line."""
     rows = read_table(path, LOOP_COLUMNS)
     values = {name: numeric_column(path, rows, LOOP_COLUMNS, name) for name in LOOP_COLUMNS}
     closures = []
     for k in range(len(rows)):
+        problem = _check_loop_row(values, k, frames)
+        if problem is not None:
+            raise InputError(path, problem, line=k + 2)
         translation = [values[c][k] for c in ("tx", "ty", "tz")]
-        quaternion = [values[c][k] for c in ("qx", "qy", "qz", "qw")]
+        quaternion = np.array([values[c][k] for c in ("qx", "qy", "qz", "qw")])
+        quaternion /= np.linalg.norm(quaternion)
         closures.append(
             LoopClosure(
                 query_frame=int(values["query_frame"][k]),
@@ -125,7 +160,7 @@ def read_loop_closures(path: Path) -> list[LoopClosure]:
                 match_keyframe=int(values["match_keyframe"][k]),
                 score=float(values["score"][k]),
                 n_matches=int(values["matched_objects"][k]),
-                relative_pose=pose_from_quaternion(np.array(translation), np.array(quaternion))[0],
+                relative_pose=pose_from_quaternion(np.array(translation), quaternion)[0],
             )
         )
     return closures

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import io
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -10,19 +11,18 @@ from pathlib import Path
 import numpy as np
 
 from neoslam.errors import InputError
+from neoslam.io.text import read_text
 
 __all__ = ["read_table", "write_table", "numeric_column"]
 
 
 def read_table(path: Path, columns: Sequence[str]) -> list[list[str]]:
     """Rows (lists of strings) of a CSV file whose header is exactly `columns`."""
-    if not path.is_file():
-        raise InputError(path, "file not found")
+    reader = csv.reader(io.StringIO(read_text(path), newline=""))
     try:
-        with path.open(newline="", encoding="utf-8") as handle:
-            rows = [row for row in csv.reader(handle) if row]  # blank lines carry nothing
-    except UnicodeDecodeError:
-        raise InputError(path, "not a text file (not UTF-8)") from None
+        rows = [row for row in reader if row]  # blank lines carry nothing
+    except csv.Error as error:  # a NUL byte, a field over csv's size limit
+        raise InputError(path, f"not a CSV table ({error})", line=reader.line_num) from None
     if not rows:
         raise InputError(path, f"empty file: expected the header {','.join(columns)}", line=1)
     if [name.strip() for name in rows[0]] != list(columns):

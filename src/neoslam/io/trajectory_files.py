@@ -15,6 +15,7 @@ import numpy as np
 from neoslam.errors import InputError, OutputError
 from neoslam.geometry import pose_from_quaternion, quaternion_from_pose
 from neoslam.io.frames import camera_poses_to_robot, robot_poses_to_camera
+from neoslam.io.text import read_text
 from neoslam.types import Trajectory
 
 __all__ = [
@@ -25,6 +26,7 @@ __all__ = [
     "read_kitti",
     "read_times",
     "read_trajectory",
+    "data_line_numbers",
     "write_tum",
     "write_kitti",
     "write_times",
@@ -50,16 +52,7 @@ _KITTI_COLUMNS = 12
 
 def _data_lines(path: Path) -> list[tuple[int, list[str]]]:
     """(line number, tokens) of every line that is neither blank nor a `#` comment."""
-    try:
-        text = path.read_text(encoding="utf-8-sig")  # -sig: tolerate a byte-order mark from Windows editors
-    except FileNotFoundError:
-        raise InputError(path, "file not found") from None
-    except IsADirectoryError:
-        raise InputError(path, "is a folder, not a file") from None
-    except UnicodeDecodeError:
-        raise InputError(path, "not a text file (not UTF-8)") from None
-    except OSError as exc:
-        raise InputError(path, f"cannot be read ({exc.strerror})") from None
+    text = read_text(path)
     rows = []
     for number, line in enumerate(text.splitlines(), start=1):
         stripped = line.strip()
@@ -68,6 +61,11 @@ def _data_lines(path: Path) -> list[tuple[int, list[str]]]:
     if not rows:
         raise InputError(path, "no data lines (the file is empty or only has comments)")
     return rows
+
+
+def data_line_numbers(path: str | Path) -> np.ndarray:
+    """The 1-based line number of each pose (data line) of a trajectory or times file, to name a pose's line."""
+    return np.array([number for number, _ in _data_lines(Path(path))])
 
 
 def _read_numbers(path: Path, columns: int) -> tuple[np.ndarray, np.ndarray]:

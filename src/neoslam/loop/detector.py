@@ -121,6 +121,8 @@ class LoopClosureDetector:
         if any(h.keyframe_id != keyframe.id - len(history) + i for i, h in enumerate(history)):
             return []  # not consecutive keyframes
         accepted = [h.closure for h in [*history, current] if h.keyframe_id not in self._emitted]
+        # only the last `consecutive` keyframes can be emitted again: forget the others (a lifelong drive)
+        self._emitted = {k for k in self._emitted if k > keyframe.id - len(history) - 1}
         self._emitted.update(c.query_keyframe for c in accepted)
         return accepted
 
@@ -130,5 +132,5 @@ class LoopClosureDetector:
     def scores(self, keyframe: Keyframe) -> tuple[np.ndarray, np.ndarray]:
         """Spectral and verified matching scores of `keyframe` against every stored keyframe (paper Fig. 4c), with
         no retrieval and no gate."""
-        matches = [self._match(keyframe, i) for i in range(len(self.index))]
+        matches = [self._match(keyframe, stored.id) for stored in self.index.keyframes]
         return np.array([m.score for m in matches]), np.array([m.verified_score for m in matches])

@@ -5,16 +5,21 @@ is a candidate only if it is not recent (`exclude_recent_distance` of travel), a
 the current estimated position that grows with the distance travelled since it was made (odometry drift bounds
 how far the estimate can be off). Candidates are ranked by a coarse signature (label histogram and histogram of
 pairwise object distances) and the best few are matched.
+
+Keyframes are named by their id everywhere (eligible, candidates, nearest, odometer): a keyframe that a closure
+recognises as a stored one is not stored again (lifelong mapping), so the stored ids need not be consecutive.
 """
 
 from __future__ import annotations
+
+from collections.abc import Iterator
 
 import numpy as np
 
 from neoslam.config import MatchingConfig
 from neoslam.types import Keyframe
 
-__all__ = ["KeyframeIndex", "signature"]
+__all__ = ["KeyframeIndex", "StoredKeyframes", "signature"]
 
 LABEL_BINS = 8  # labels hashed into this many bins (YOLO's classes in use are far fewer)
 DISTANCE_BINS = np.linspace(0.0, 40.0, 21)  # m, pairwise object distances
@@ -35,12 +40,38 @@ def signature(keyframe: Keyframe) -> np.ndarray:
     return vector / max(np.linalg.norm(vector), 1e-12)
 
 
+class StoredKeyframes:
+    """The stored keyframes by id (`store[id]`, `id in store`), iterated in the order they were stored."""
+
+    def __init__(self) -> None:
+        self._by_id: dict[int, Keyframe] = {}
+
+    def __getitem__(self, keyframe_id: int) -> Keyframe:
+        return self._by_id[int(keyframe_id)]
+
+    def __contains__(self, keyframe_id: object) -> bool:
+        return keyframe_id in self._by_id
+
+    def __iter__(self) -> Iterator[Keyframe]:
+        return iter(self._by_id.values())
+
+    def __len__(self) -> int:
+        return len(self._by_id)
+
+    def append(self, keyframe: Keyframe) -> None:
+        if keyframe.id in self._by_id:
+            raise ValueError(f"keyframe {keyframe.id} is stored already")
+        self._by_id[keyframe.id] = keyframe
+
+
 class KeyframeIndex:
     """Stored keyframes with their position, odometer reading and signature, in growable arrays."""
 
     def __init__(self, config: MatchingConfig) -> None:
         self.config = config
-        self.keyframes: list[Keyframe] = []
+        self.keyframes = StoredKeyframes()
+        self._ids = np.zeros(INITIAL_CAPACITY, dtype=int)  # increasing: keyframes are stored in the order made
+        self._slots: dict[int, int] = {}
         self._positions = np.zeros((INITIAL_CAPACITY, 2))
         self._odometer = np.zeros(INITIAL_CAPACITY)
         self._signatures = np.zeros((INITIAL_CAPACITY, LABEL_BINS + len(DISTANCE_BINS) - 1))
@@ -50,34 +81,43 @@ class KeyframeIndex:
 
     def add(self, keyframe: Keyframe, odometer_m: float) -> None:
         n = len(self.keyframes)
+        if n and keyframe.id <= self._ids[n - 1]:
+            raise ValueError(f"keyframe {keyframe.id} stored after keyframe {self._ids[n - 1]}: ids must increase")
         if n == len(self._odometer):  # double the capacity
+            self._ids = np.concatenate([self._ids, np.zeros_like(self._ids)])
             self._positions = np.concatenate([self._positions, np.zeros_like(self._positions)])
             self._odometer = np.concatenate([self._odometer, np.zeros_like(self._odometer)])
             self._signatures = np.concatenate([self._signatures, np.zeros_like(self._signatures)])
+        self._ids[n] = keyframe.id
+        self._slots[keyframe.id] = n
         self._positions[n] = keyframe.pose[:2, 3]
         self._odometer[n] = odometer_m
         self._signatures[n] = signature(keyframe)
         self.keyframes.append(keyframe)
 
-    def odometer(self, index: int) -> float:
-        """The odometer reading (m) when stored keyframe `index` was made."""
-        return float(self._odometer[index])
+    def odometer(self, keyframe_id: int) -> float:
+        """The odometer reading (m) when stored keyframe `keyframe_id` was made."""
+        return float(self._odometer[self._slots[int(keyframe_id)]])
+
+    def _slots_of(self, keyframe_ids: np.ndarray) -> np.ndarray:
+        return np.searchsorted(self._ids[: len(self.keyframes)], keyframe_ids)
 
     def eligible(self, position: np.ndarray, odometer_m: float) -> np.ndarray:
-        """Indices of stored keyframes that are old enough and within the drift-bounded search radius."""
+        """Ids of stored keyframes that are old enough and within the drift-bounded search radius."""
         n = len(self.keyframes)
         travelled = odometer_m - self._odometer[:n]
         radius = self.config.search_radius + self.config.search_radius_per_metre * travelled
         near = np.linalg.norm(self._positions[:n] - position[:2], axis=1) <= radius
-        return np.flatnonzero(near & (travelled >= self.config.exclude_recent_distance))
+        return self._ids[:n][near & (travelled >= self.config.exclude_recent_distance)]
 
     def candidates(self, query: Keyframe, odometer_m: float) -> np.ndarray:
-        """The best `candidates` eligible keyframes by signature similarity, best first."""
+        """Ids of the best `candidates` eligible keyframes by signature similarity, best first."""
         eligible = self.eligible(query.pose[:3, 3], odometer_m)
-        similarity = self._signatures[eligible] @ signature(query)
+        similarity = self._signatures[self._slots_of(eligible)] @ signature(query)
         order = np.argsort(-similarity, kind="stable")[: self.config.candidates]
         return eligible[order]
 
     def nearest(self, position: np.ndarray, among: np.ndarray) -> int:
-        """The keyframe among `among` whose pose is closest to a position (x, y)."""
-        return int(among[np.argmin(np.linalg.norm(self._positions[among] - position[:2], axis=1))])
+        """The id of the keyframe among `among` (ids) whose pose is closest to a position (x, y)."""
+        slots = self._slots_of(np.asarray(among))
+        return int(among[np.argmin(np.linalg.norm(self._positions[slots] - position[:2], axis=1))])

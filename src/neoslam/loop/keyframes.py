@@ -11,6 +11,7 @@ take them.
 
 from __future__ import annotations
 
+from array import array
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -20,7 +21,24 @@ from neoslam.geometry import transform_points
 from neoslam.io.frames import camera_points_to_robot
 from neoslam.types import Keyframe, ObjectObservation
 
-__all__ = ["LocalObjectWindow", "KeyframeBuilder"]
+__all__ = ["LocalObjectWindow", "KeyframeBuilder", "object_centres"]
+
+
+def object_centres(
+    observations: tuple[ObjectObservation, ...], footprints: dict[str, tuple[float, float]]
+) -> np.ndarray:
+    """(n, 3) stereo centres (camera frame) moved from the visible surface to the object's middle, along the viewing
+    ray: otherwise a place driven the other way sees every object from its other side, a metre or two away, and a
+    far view (the object's end) and a near one (its side) disagree. The depth to add is the radius of the class's
+    footprint ellipse (length, width) in the direction of the ray, taking objects to lie along the road, that is
+    along the robot's heading."""
+    surface = np.array([o.center_camera for o in observations], dtype=float).reshape(-1, 3)
+    footprint = np.array([footprints.get(o.label, (0.0, 0.0)) for o in observations], dtype=float).reshape(-1, 2) / 2
+    bearing = np.arctan2(surface[:, 0], surface[:, 2])  # angle between the ray and the heading
+    with np.errstate(divide="ignore", invalid="ignore"):
+        radius = 1.0 / np.sqrt((np.cos(bearing) / footprint[:, 0]) ** 2 + (np.sin(bearing) / footprint[:, 1]) ** 2)
+    radius = np.nan_to_num(radius)  # a class without a footprint is taken as a point
+    return surface * (1.0 + radius / np.linalg.norm(surface, axis=1))[:, None]
 
 
 @dataclass
@@ -60,17 +78,7 @@ class LocalObjectWindow:
         self.objects = [o for o in self.objects if o.last_seen_m >= horizon]
 
     def _object_centres(self, observations: tuple[ObjectObservation, ...]) -> np.ndarray:
-        """Stereo centres moved from the visible surface to the object's middle, along the viewing ray: otherwise
-        a place driven the other way sees every object from its other side, a metre or two away. The depth to add
-        is the radius of the class's footprint ellipse in the direction of the ray, taking objects to lie along
-        the road, that is along the robot's heading."""
-        surface = np.array([o.center_camera for o in observations])
-        footprint = np.array([self.config.footprints.get(o.label, (0.0, 0.0)) for o in observations]) / 2
-        bearing = np.arctan2(surface[:, 0], surface[:, 2])  # angle between the ray and the heading
-        with np.errstate(divide="ignore", invalid="ignore"):
-            radius = 1.0 / np.sqrt((np.cos(bearing) / footprint[:, 0]) ** 2 + (np.sin(bearing) / footprint[:, 1]) ** 2)
-        radius = np.nan_to_num(radius)  # a class without a footprint is taken as a point
-        return surface * (1.0 + radius / np.linalg.norm(surface, axis=1))[:, None]
+        return object_centres(observations, self.config.footprints)
 
     def _fuse(self, observation: ObjectObservation, point: np.ndarray, weight: float, odometer_m: float) -> None:
         same_label = [o for o in self.objects if o.label == observation.label]
@@ -102,6 +110,7 @@ class KeyframeBuilder:
         self.odometer_m = 0.0
         self._next_keyframe_m = 0.0
         self._next_id = 0
+        self.frames = array("l")  # the frame of every keyframe made (ids are positions here)
 
     def add(self, frame_index: int, pose: np.ndarray, observations, travelled_m: float) -> Keyframe | None:
         """Feed one frame (pose estimate and observations); returns a new keyframe when one is due."""
@@ -132,6 +141,7 @@ class KeyframeBuilder:
             patches=np.array([objects[i].patch_sum / objects[i].observations for i in around]),
         )
         self._next_id += 1
+        self.frames.append(frame_index)
         return keyframe
 
     def _neighbourhood(self, distances: np.ndarray) -> np.ndarray:

@@ -7,22 +7,43 @@ objects still get experiences). Each new experience is linked to the previous on
 A loop closure is accepted only when the recognised experience's grid-cell state is within
 `gc_distance_threshold` cells of the current one (the paper's second guard); it then links the two experiences
 with the metric transform of the object fit and triggers the correction.
+
+Lifelong mapping (`reuse_places`, RatSLAM's and NeuroSLAM's rule, beyond the paper): a street driven again must
+not add a copy of itself. A new keyframe that a closure recognises as a stored one (cells within the guard, heading
+within `reuse_max_turn_deg`) makes no experience, provided the map agrees (the closure puts the robot within
+`reentry_distance` and `reentry_yaw_deg` of where the map has it): the robot re-enters the stored keyframe's
+experience, placed in it by the closure's fit. Coming from an experience it made since it last knew where it was,
+that one is linked to the stored one (a loop link, once per pair), which ties it to the map; coming from a stored
+experience, nothing is added (the map holds that relation). A closure the map disagrees with (the robot is back
+after a long loop and the map is off) does what the paper does: the keyframe gets its own experience and a loop
+link that corrects the map, until the map agrees. For `localised_distance` metres after a recognised place the
+robot knows where it is, and a new keyframe or a move of the cells that finds an experience within `reuse_radius`
+of the corrected pose, heading the same way, re-enters that experience too (no link). Frames keep the experience
+they were in and where the robot entered it (a visit), so the trajectory is the same whichever way the map was
+built.
 """
 
 from __future__ import annotations
 
+from array import array
 from dataclasses import dataclass
 
 import numpy as np
 
 from neoslam.config import ExperienceMapConfig
-from neoslam.geometry import invert_pose
+from neoslam.geometry import invert_pose, rotation_angle, yaw_of
 from neoslam.mapping.graph import Link, MapGraph
 from neoslam.mapping.pose_graph import optimise_pose_graph
 from neoslam.mapping.relaxation import LinkMeasurement, link_measurement, relax
 from neoslam.types import Experience, LoopClosure, Trajectory
 
-__all__ = ["CellState", "ExperienceMap"]
+__all__ = ["CellState", "ExperienceMap", "Revisit"]
+
+RECENT_MERGED_KEYFRAMES = 8  # keyframes merged into stored ones that a late closure (consecutive test) may still name
+INITIAL_VISITS = 256
+# A street driven the second time links each experience it re-enters to the one before; those links measure a map
+# that already holds them, and the pose graph takes them BATCHED_LINKS at a time, not one optimisation each.
+BATCHED_LINKS = 10
 
 
 def _circular(a: np.ndarray, b: np.ndarray, dims: np.ndarray) -> np.ndarray:
@@ -38,6 +59,16 @@ class CellState:
     head_direction: float
 
 
+@dataclass(frozen=True)
+class Revisit:
+    """The current keyframe is stored keyframe `keyframe` seen again: recognised by a loop closure (whose fit puts
+    the robot in that keyframe's experience), or, while the robot knows where it is, found there in the map."""
+
+    keyframe: int
+    robot_in_experience: np.ndarray  # (4, 4) T_experience_robot
+    closure: LoopClosure | None = None
+
+
 class ExperienceMap:
     """Experiences, their links and the map correction."""
 
@@ -48,34 +79,80 @@ class ExperienceMap:
         self.experiences: list[Experience] = []
         self.graph = MapGraph()
         self._measurements: list[LinkMeasurement] = []
-        self._odometry_poses: list[np.ndarray] = []  # each experience's odometry pose, to place frames between
+        self._odometry_poses: list[np.ndarray] = []  # each experience's odometry pose when it was made
         self._by_keyframe: dict[int, int] = {}
-        self._frame_experience: list[int] = []  # the current experience of every frame
+        self._merged: dict[int, tuple[int, np.ndarray]] = {}  # recent keyframes merged: (experience, T_exp_robot)
+        self._linked: set[tuple[int, int]] = set()  # pairs of experiences with a link, smaller id first
+        self._reentered: set[int] = set()  # experiences a closure has re-entered
+        self._unoptimised = 0  # links added since the last optimisation
+        self._current = -1
+        self._current_is_new = False  # whether the current visit made its experience (not yet tied to the map)
+        self._anchor = np.eye(4)  # the current experience's pose in the odometry frame, as entered in this visit
+        self._visit_cells: CellState | None = None  # the cells when the current visit began
+        self._visit_experience = array("l")  # per visit: the experience entered
+        self._visit_anchors = np.zeros((INITIAL_VISITS, 4, 4))  # per visit: its anchor
+        self._frame_visit = array("l")  # the visit of every frame
         self._travelled_since = 0.0
+        self._odometer = 0.0
+        self._localised_at = -np.inf  # odometer reading of the last recognised place
         self.rejected_closures: list[LoopClosure] = []
         self.accepted_closures: list[LoopClosure] = []
 
     @property
     def current(self) -> int:
-        return len(self.experiences) - 1
+        return self._current
+
+    @property
+    def visits(self) -> int:
+        """How many times an experience was entered (made or re-entered)."""
+        return len(self._visit_experience)
+
+    @property
+    def localised(self) -> bool:
+        """Whether a place was recognised within the last `localised_distance` metres of travel."""
+        return self._odometer - self._localised_at <= self.config.localised_distance
 
     def similarity(self, cells: CellState, experience: Experience) -> float:
         """S of eq. 17: μ_gc |P_gc − P_gc,i| + μ_hdc |P_hdc − P_hdc,i|, circular distances in cells."""
-        grid = np.linalg.norm(_circular(cells.grid, experience.grid_cell, self.grid_dims))
-        heading = float(_circular(cells.head_direction, experience.head_direction, self.head_direction_cells))
-        return self.config.mu_gc * grid + self.config.mu_hdc * heading
+        return self._similarity(cells, experience.grid_cell, experience.head_direction)
+
+    def _similarity(self, cells: CellState, grid: np.ndarray, head_direction: float) -> float:
+        grid_distance = np.linalg.norm(_circular(cells.grid, grid, self.grid_dims))
+        heading = float(_circular(cells.head_direction, head_direction, self.head_direction_cells))
+        return self.config.mu_gc * grid_distance + self.config.mu_hdc * heading
 
     def step(self, frame_index: int, odometry_pose: np.ndarray, velocities, cells: CellState, travelled_m: float,
-             keyframe_id: int | None) -> None:  # fmt: skip
-        """Record one frame: a new experience for a new keyframe, or when the cells left the current one."""
+             keyframe_id: int | None, revisit: Revisit | None = None) -> None:  # fmt: skip
+        """Record one frame: a new experience for a new keyframe, or when the cells left the current one; with a
+        revisit (see `recognise`), re-enter the stored keyframe's experience instead; when the cells move on while
+        the robot knows where it is, re-enter an experience at the corrected pose if there is one."""
         self._travelled_since += travelled_m
-        new_template = keyframe_id is not None
-        if not self.experiences or new_template or self._cells_moved_on(cells):
+        self._odometer += travelled_m
+        if revisit is not None:
+            self._reenter(revisit, odometry_pose, cells, keyframe_id)
+        elif (
+            not self.experiences
+            or keyframe_id is not None
+            or (self._cells_moved_on(cells) and not self._reenter_nearby(odometry_pose, cells))
+        ):
             self._create(frame_index, odometry_pose, velocities, cells, keyframe_id)
-        self._frame_experience.append(self.current)
+        self._frame_visit.append(self.visits - 1)
 
     def _cells_moved_on(self, cells: CellState) -> bool:
-        return self.similarity(cells, self.experiences[-1]) > self.config.similarity_threshold
+        """S of eq. 17 against the cells where the current visit began (for a new experience, its own cells)."""
+        visit = self._visit_cells
+        assert visit is not None  # set by the first experience
+        return self._similarity(cells, visit.grid, visit.head_direction) > self.config.similarity_threshold
+
+    def _begin_visit(self, experience: int, anchor: np.ndarray, cells: CellState, new: bool = False) -> None:
+        self._current = experience
+        self._current_is_new = new
+        self._anchor = anchor.copy()
+        self._visit_cells = CellState(np.asarray(cells.grid, float).copy(), float(cells.head_direction))
+        self._visit_anchors = _grown(self._visit_anchors, self.visits + 1)
+        self._visit_anchors[self.visits] = anchor
+        self._visit_experience.append(experience)
+        self._travelled_since = 0.0
 
     def _create(self, frame_index, odometry_pose, velocities, cells: CellState, keyframe_id) -> None:
         previous = self.current
@@ -90,7 +167,7 @@ class ExperienceMap:
             keyframe_id=keyframe_id,
         )
         if previous >= 0:  # place it where the odometry says, relative to the corrected previous experience
-            relative = invert_pose(self._odometry_poses[previous]) @ odometry_pose
+            relative = invert_pose(self._anchor) @ odometry_pose
             self.graph.add_node(self.graph.poses[previous] @ relative)
             self._link(Link(previous, experience.id, relative, "odometry", self._travelled_since))
         else:
@@ -99,27 +176,154 @@ class ExperienceMap:
         self._odometry_poses.append(odometry_pose.copy())
         if keyframe_id is not None:
             self._by_keyframe[keyframe_id] = experience.id
-        self._travelled_since = 0.0
+        self._begin_visit(experience.id, odometry_pose, cells, new=True)
 
     def _link(self, link: Link) -> None:
         self.graph.add_link(link)
         self._measurements.append(link_measurement(self.graph, link))
+        self._linked.add((min(link.source, link.target), max(link.source, link.target)))
+
+    def _is_linked(self, a: int, b: int) -> bool:
+        return (min(a, b), max(a, b)) in self._linked
+
+    def _optimise(self) -> None:
+        self._unoptimised = 0
+        if self.config.backend == "pose-graph":
+            optimise_pose_graph(self.graph, self.config)
+
+    def finish(self) -> None:
+        """Optimise the links still waiting (see BATCHED_LINKS): the map as the last frame leaves it."""
+        if self._unoptimised:
+            self._optimise()
+
+    def recognise(
+        self, keyframe_id: int, closures: list[LoopClosure], cells: CellState, odometry_pose: np.ndarray
+    ) -> Revisit | None:
+        """Whether new keyframe `keyframe_id` is a stored keyframe seen again (`reuse_places`): its own closure among
+        `closures`, if the cells agree and it faces the stored keyframe's way; or, with no closure of its own while
+        the robot knows where it is, the stored keyframe whose experience lies within `reuse_radius` of the
+        corrected pose, heading the same way. None: a new keyframe (and experience)."""
+        if not self.config.reuse_places or not self.experiences:
+            return None
+        own = next((c for c in closures if c.query_keyframe == keyframe_id), None)
+        pose = self.current_pose(odometry_pose)
+        if own is not None:
+            stored = self._by_keyframe.get(own.match_keyframe)
+            if stored is None or not self._cells_agree(cells, stored):
+                return None
+            turn = float(np.degrees(rotation_angle(own.relative_pose[:3, :3])))
+            in_map = invert_pose(self.graph.poses[stored]) @ pose  # where the map has the robot
+            if turn > self.config.reuse_max_turn_deg or not self._agrees(in_map, own.relative_pose):
+                return None
+            return Revisit(own.match_keyframe, own.relative_pose, own)
+        if not self.localised:
+            return None
+        target = self._nearest(pose, keyframes_only=True)
+        if target is None:
+            return None
+        keyframe = self.experiences[target].keyframe_id
+        assert keyframe is not None
+        return Revisit(keyframe, invert_pose(self.graph.poses[target]) @ pose)
+
+    def _agrees(self, estimate: np.ndarray, measurement: np.ndarray) -> bool:
+        """Whether two relative poses agree within reentry_distance (in the ground plane: a closure's height is the
+        difference of its objects' mean heights, metres off at times) and reentry_yaw_deg."""
+        error = invert_pose(estimate) @ measurement
+        close = np.linalg.norm(error[:2, 3]) <= self.config.reentry_distance
+        return bool(close and np.degrees(rotation_angle(error[:3, :3])) <= self.config.reentry_yaw_deg)
+
+    def _cells_agree(self, cells: CellState, experience: int) -> bool:
+        """The paper's guard: the recognised experience's grid cells within gc_distance_threshold of the current."""
+        distance = np.linalg.norm(_circular(cells.grid, self.experiences[experience].grid_cell, self.grid_dims))
+        return bool(distance <= self.config.gc_distance_threshold)
+
+    def _nearest(self, pose: np.ndarray, keyframes_only: bool) -> int | None:
+        """The experience nearest to a corrected pose within `reuse_radius`, heading within `reuse_max_turn_deg`."""
+        poses = self.graph.poses
+        distance = np.linalg.norm(poses[:, :3, 3] - pose[:3, 3], axis=1)
+        turn = np.abs(np.angle(np.exp(1j * (yaw_of(poses) - yaw_of(pose)))))
+        near = (distance <= self.config.reuse_radius) & (turn <= np.radians(self.config.reuse_max_turn_deg))
+        if keyframes_only:
+            near &= np.fromiter((e.keyframe_id is not None for e in self.experiences), bool, len(self.experiences))
+        if not near.any():
+            return None
+        return int(np.flatnonzero(near)[np.argmin(distance[near])])
+
+    def _reenter(self, revisit: Revisit, odometry_pose: np.ndarray, cells: CellState, keyframe_id) -> None:
+        """Enter the revisited keyframe's experience where the revisit puts the robot; a closure also links the
+        previous experience to it (once per pair) and corrects the map."""
+        target = self._by_keyframe[revisit.keyframe]
+        robot_in_experience = revisit.robot_in_experience.copy()
+        anchor = odometry_pose @ invert_pose(robot_in_experience)
+        if keyframe_id is not None:
+            self._merged[keyframe_id] = (target, robot_in_experience)
+            while len(self._merged) > RECENT_MERGED_KEYFRAMES:
+                del self._merged[next(iter(self._merged))]
+        linked = False
+        if revisit.closure is not None:
+            self.accepted_closures.append(revisit.closure)
+            self._localised_at = self._odometer
+            measured = invert_pose(self._anchor) @ anchor
+            if target != self.current and self._current_is_new:  # ties what the robot made to the map
+                linked = self._link_if_news(self.current, target, measured)
+            elif target != self.current and target not in self._reentered:  # the street's second measurement
+                self._link(Link(self.current, target, measured, "loop", 0.0))
+                self._unoptimised += 1  # between experiences the map already holds: optimised a batch at a time
+                linked = self._unoptimised >= BATCHED_LINKS
+        self._reentered.add(target)
+        self._begin_visit(target, anchor, cells)
+        if linked:
+            self._optimise()
+
+    def _link_if_news(self, source: int, target: int, relative: np.ndarray) -> bool:
+        """A loop link source -> target measured by a closure, unless the map holds it already: the two are linked
+        and the map puts them where the measurement does (within reentry_distance and reentry_yaw_deg). Returns
+        whether the link was added. (Used where the robot comes from an experience it made since it last knew
+        where it was: the link ties it to the map.)"""
+        if self._is_linked(source, target) and self._agrees(self.graph.relative(source, target), relative):
+            return False
+        self._link(Link(source, target, relative, "loop", 0.0))
+        return True
+
+    def _reenter_nearby(self, odometry_pose: np.ndarray, cells: CellState) -> bool:
+        """While the robot knows where it is, enter the experience at the corrected pose instead of making one;
+        returns whether there was one (staying in the current one counts)."""
+        if not self.config.reuse_places or not self.experiences or not self.localised:
+            return False
+        pose = self.current_pose(odometry_pose)
+        target = self._nearest(pose, keyframes_only=False)
+        if target is None:
+            return False
+        if target == self.current:
+            self._visit_cells = cells  # still here: measure the cells' move from now on
+        else:
+            self._reentered.add(target)
+            self._begin_visit(target, odometry_pose @ invert_pose(invert_pose(self.graph.poses[target]) @ pose), cells)
+        return True
 
     def close_loop(self, closure: LoopClosure, cells: CellState) -> bool:
         """Link the experiences of a closure's keyframes if the cells agree (paper: about seven bins); returns
         whether the closure was accepted into the map."""
         stored = self._by_keyframe.get(closure.match_keyframe)
         query = self._by_keyframe.get(closure.query_keyframe)
-        if stored is None or query is None:
+        merged = self._merged.get(closure.query_keyframe) if query is None else None
+        if stored is None or (query is None and merged is None):
             return False
-        distance = np.linalg.norm(_circular(cells.grid, self.experiences[stored].grid_cell, self.grid_dims))
-        if distance > self.config.gc_distance_threshold:
+        if not self._cells_agree(cells, stored):
             self.rejected_closures.append(closure)
             return False
-        self._link(Link(stored, query, closure.relative_pose, "loop", 0.0))
         self.accepted_closures.append(closure)
-        if self.config.backend == "pose-graph":
-            optimise_pose_graph(self.graph, self.config)
+        self._localised_at = self._odometer
+        if query is not None:
+            self._link(Link(stored, query, closure.relative_pose, "loop", 0.0))
+        else:  # the query keyframe was merged into a stored one: the closure relates two stored experiences
+            assert merged is not None
+            experience, robot_in_experience = merged
+            relative = closure.relative_pose @ invert_pose(robot_in_experience)  # T_stored_experience
+            if experience == stored or self._agrees(self.graph.relative(stored, experience), relative):
+                return True  # the map holds that already
+            self._link(Link(stored, experience, relative, "loop", 0.0))
+        self._optimise()
         return True
 
     def correct(self) -> None:
@@ -134,17 +338,27 @@ class ExperienceMap:
         return points @ correction[:3, :3].T + correction[:3, 3]
 
     def anchor(self, odometry_pose: np.ndarray) -> tuple[int, np.ndarray]:
-        """The current experience and the robot's pose in its frame (from the odometry since it was made)."""
-        return self.current, invert_pose(self._odometry_poses[self.current]) @ odometry_pose
+        """The current experience and the robot's pose in its frame (from the odometry since it was entered)."""
+        return self.current, invert_pose(self._anchor) @ odometry_pose
 
     def current_pose(self, odometry_pose: np.ndarray) -> np.ndarray:
         """The corrected pose of a frame of the current experience, from its odometry pose."""
-        anchor = self._odometry_poses[self.current]
-        return self.graph.poses[self.current] @ invert_pose(anchor) @ odometry_pose
+        return self.graph.poses[self.current] @ invert_pose(self._anchor) @ odometry_pose
 
     def trajectory(self, timestamps: np.ndarray, odometry_poses: np.ndarray) -> Trajectory:
-        """A pose for every frame: its experience's corrected pose, moved on by the odometry since."""
-        owner = np.asarray(self._frame_experience, dtype=int)
-        anchors = np.asarray(self._odometry_poses).reshape(-1, 4, 4)[owner]
+        """A pose for every frame: the corrected pose of the experience it was in, moved on by the odometry since
+        the robot entered it."""
+        visits = np.frombuffer(self._frame_visit, dtype=self._frame_visit.typecode).astype(int)
+        owner = np.frombuffer(self._visit_experience, dtype=self._visit_experience.typecode).astype(int)[visits]
+        anchors = self._visit_anchors[visits]
         poses = self.graph.poses[owner] @ invert_pose(anchors) @ odometry_poses
         return Trajectory(np.asarray(timestamps), poses)
+
+
+def _grown(array_: np.ndarray, size: int) -> np.ndarray:
+    """The array with room for `size` rows (capacity doubled as needed)."""
+    if size <= len(array_):
+        return array_
+    grown = np.zeros((max(2 * len(array_), size), *array_.shape[1:]), dtype=array_.dtype)
+    grown[: len(array_)] = array_
+    return grown

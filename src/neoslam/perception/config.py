@@ -8,11 +8,19 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-__all__ = ["DetectionPass", "DetectorConfig", "StereoObjectConfig", "StereoOdometryConfig", "PerceptionConfig"]
+__all__ = [
+    "DetectionPass",
+    "DetectorConfig",
+    "StereoObjectConfig",
+    "StereoOdometryConfig",
+    "BagConfig",
+    "PerceptionConfig",
+]
 
 
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # allow_inf_nan=False: .inf or .nan is refused with the field's name (as in neoslam.config).
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 DATA_ENV = "NEOSLAM_DATA"  # where the shared data (models among it) lives
@@ -83,17 +91,19 @@ class DetectorConfig(_Section):
         "as two (car and truck): the lower score goes; 1 keeps both (a cyclist's person and bicycle overlap ~0.55)",
     )
     min_box_height: float = Field(
-        12.0, ge=0, description="smaller boxes are dropped, px (KITTI's object benchmark ignores them too)"
+        12.0, ge=0, le=1e4, description="smaller boxes are dropped, px (KITTI's object benchmark ignores them too)"
     )
     cut_margin: float = Field(
         4.0,
         ge=0,
+        le=1e4,
         description="a box this close to an edge of its window that lies inside the image holds an object the "
         "window cuts, px: left to the windows that see it whole",
     )
     contrast_clip: float = Field(
         3.0,
         ge=0,
+        le=1000,
         description="contrast-limited histogram equalisation (CLAHE) of the image before detection: its clip "
         "limit; 0 switches it off (KITTI's grey frames are dark where cars stand in shade)",
     )
@@ -110,23 +120,29 @@ class DetectorConfig(_Section):
 class StereoObjectConfig(_Section):
     """ORB keypoints in each left box matched along the rectified epipolar line, then triangulated (paper 3.1)."""
 
-    orb_features: int = Field(300, gt=0, description="most ORB keypoints detected in one box")
-    orb_scale_factor: float = Field(1.2, gt=1, description="ORB pyramid scale between levels")
-    orb_fast_threshold: int = Field(12, gt=0, description="FAST threshold of the ORB detector")
-    max_hamming: int = Field(60, gt=0, description="largest ORB descriptor distance of a stereo match, bits")
+    orb_features: int = Field(300, gt=0, le=100_000, description="most ORB keypoints detected in one box")
+    orb_scale_factor: float = Field(1.2, gt=1, le=4, description="ORB pyramid scale between levels")
+    orb_fast_threshold: int = Field(12, gt=0, le=255, description="FAST threshold of the ORB detector")
+    max_hamming: int = Field(60, gt=0, le=256, description="largest ORB descriptor distance of a stereo match, bits")
     ratio: float = Field(0.9, gt=0, le=1, description="best / second-best descriptor distance, at most")
     row_tolerance: float = Field(
         2.0,
         ge=0,
+        le=1000,
         description="rectified rows of a match differ by at most this, px, times the keypoint's pyramid scale",
     )
-    min_disparity: float = Field(1.0, gt=0, description="smaller disparities (far points) are not used, px")
-    max_disparity: float = Field(160.0, gt=0, description="largest disparity searched, px")
-    refine_window: int = Field(5, ge=0, description="half size of the SAD window of the sub-pixel refinement, px")
-    border_margin: float = Field(
-        3.0, ge=0, description="boxes this close to the image border hold a cut-off object and are not placed, px"
+    min_disparity: float = Field(1.0, gt=0, le=1e4, description="smaller disparities (far points) are not used, px")
+    max_disparity: float = Field(160.0, gt=0, le=1e4, description="largest disparity searched, px")
+    refine_window: int = Field(
+        5, ge=0, le=100, description="half size of the SAD window of the sub-pixel refinement, px"
     )
-    min_points: int = Field(5, gt=0, description="an object needs this many triangulated keypoints")
+    border_margin: float = Field(
+        3.0,
+        ge=0,
+        le=1e4,
+        description="boxes this close to the image border hold a cut-off object and are not placed, px",
+    )
+    min_points: int = Field(5, gt=0, le=10_000, description="an object needs this many triangulated keypoints")
     min_visible_share: float = Field(
         0.35,
         ge=0,
@@ -134,43 +150,75 @@ class StereoObjectConfig(_Section):
         description="a box less unhidden than this by boxes reaching lower in the image (nearer objects on the road) "
         "is not placed: most of its keypoints are the nearer object's",
     )
-    inlier_sigmas: float = Field(2.5, gt=0, description="keypoints this many robust std from the median depth go")
-    min_depth_spread: float = Field(
-        0.3, gt=0, description="least robust depth std of an object's keypoints, m (a car is deeper than a plane)"
+    inlier_sigmas: float = Field(
+        2.5, gt=0, le=100, description="keypoints this many robust std from the median depth go"
     )
-    min_depth: float = Field(1.0, gt=0, description="objects closer than this are dropped, m")
+    min_depth_spread: float = Field(
+        0.3,
+        gt=0,
+        le=1000,
+        description="least robust depth std of an object's keypoints, m (a car is deeper than a plane)",
+    )
+    min_depth: float = Field(1.0, gt=0, le=1e4, description="objects closer than this are dropped, m")
     max_depth: float = Field(
         60.0,
         gt=0,
+        le=1e4,
         description="objects farther than this are dropped, m (the keyframe fusion weighs far, noisy views little; "
         "on a real street many parked cars are placed only at 40-60 m, before hedges and other cars hide them)",
     )
-    patch_size: int = Field(16, gt=1, description="side of the grey appearance patch, px (as the simulator's)")
+    patch_size: int = Field(16, gt=1, le=256, description="side of the grey appearance patch, px (as the simulator's)")
 
 
 class StereoOdometryConfig(_Section):
     """Stereo visual odometry: corners tracked frame to frame, stereo depth, PnP with RANSAC (paper: viso2)."""
 
     source: Literal["stereo", "poses"] = Field("stereo", description="stereo: from the images; poses: --odometry")
-    max_corners: int = Field(1500, gt=0, description="Shi-Tomasi corners tracked per frame")
-    corner_quality: float = Field(0.005, gt=0, description="Shi-Tomasi quality level")
-    corner_spacing: float = Field(8.0, gt=0, description="least distance between corners, px")
-    corner_block: int = Field(3, gt=0, description="Shi-Tomasi gradient window side, px")
+    max_corners: int = Field(1500, gt=0, le=100_000, description="Shi-Tomasi corners tracked per frame")
+    corner_quality: float = Field(0.005, gt=0, lt=1, description="Shi-Tomasi quality level")
+    corner_spacing: float = Field(8.0, gt=0, le=1e4, description="least distance between corners, px")
+    corner_block: int = Field(3, gt=0, le=99, description="Shi-Tomasi gradient window side, px")
     klt_window: int = Field(
-        13, gt=2, description="Lucas-Kanade window side, px (cost grows with its square; 21 is ~2x slower, no better)"
+        13,
+        gt=2,
+        le=101,
+        description="Lucas-Kanade window side, px (cost grows with its square; 21 is ~2x slower, no better)",
     )
-    klt_levels: int = Field(3, ge=0, description="Lucas-Kanade pyramid levels of the frame-to-frame tracking")
+    klt_levels: int = Field(3, ge=0, le=10, description="Lucas-Kanade pyramid levels of the frame-to-frame tracking")
     stereo_levels: int = Field(
-        4, ge=0, description="Lucas-Kanade pyramid levels of the left-to-right match (reach large disparities)"
+        4, ge=0, le=10, description="Lucas-Kanade pyramid levels of the left-to-right match (reach large disparities)"
     )
-    forward_backward_px: float = Field(1.0, gt=0, description="a track must return within this many px")
-    row_tolerance: float = Field(1.0, ge=0, description="stereo rows differ by at most this, px")
-    min_disparity: float = Field(1.0, gt=0, description="points with less disparity are not triangulated, px")
-    max_depth: float = Field(60.0, gt=0, description="points farther than this are not used, m")
-    ransac_reprojection_px: float = Field(1.0, gt=0, description="PnP RANSAC inlier threshold, px")
-    ransac_iterations: int = Field(200, gt=0, description="PnP RANSAC iterations")
-    min_inliers: int = Field(20, gt=3, description="fewer PnP inliers: the step keeps the previous velocity")
+    forward_backward_px: float = Field(1.0, gt=0, le=1000, description="a track must return within this many px")
+    row_tolerance: float = Field(1.0, ge=0, le=1000, description="stereo rows differ by at most this, px")
+    min_disparity: float = Field(1.0, gt=0, le=1e4, description="points with less disparity are not triangulated, px")
+    max_depth: float = Field(60.0, gt=0, le=1e4, description="points farther than this are not used, m")
+    ransac_reprojection_px: float = Field(1.0, gt=0, le=1000, description="PnP RANSAC inlier threshold, px")
+    ransac_iterations: int = Field(200, gt=0, le=100_000, description="PnP RANSAC iterations")
+    min_inliers: int = Field(
+        20, gt=3, le=100_000, description="fewer PnP inliers: the step keeps the previous velocity"
+    )
     mask_objects: bool = Field(True, description="ignore corners inside detected boxes (objects may move)")
+
+
+class BagConfig(_Section):
+    """Reading a ROS 1 or ROS 2 bag: how left and right images pair into stereo frames and how the optional
+    odometry topic is sampled at the images' stamps."""
+
+    pair_tolerance_s: float = Field(
+        0.005,
+        gt=0,
+        description="a left and a right image pair when their stamps differ by at most this, s (stereo needs both "
+        "taken at once: at 10 m/s, 5 ms is 5 cm of travel; hardware-synchronised cameras give equal stamps)",
+    )
+    skip_unpaired: bool = Field(
+        False, description="drop images without a partner on the other camera instead of stopping with an error"
+    )
+    odometry_tolerance_s: float = Field(
+        0.1,
+        gt=0,
+        description="an image's odometry pose is interpolated between the odometry messages around its stamp, "
+        "which must both be this close to it, s (0.1: odometry at 10 Hz or faster)",
+    )
 
 
 class PerceptionConfig(_Section):
@@ -179,3 +227,4 @@ class PerceptionConfig(_Section):
     detector: DetectorConfig = DetectorConfig()
     stereo: StereoObjectConfig = StereoObjectConfig()
     odometry: StereoOdometryConfig = StereoOdometryConfig()
+    bag: BagConfig = BagConfig()

@@ -1,12 +1,13 @@
 """Detections read from a file, so that any detector can feed NeoSLAM in place of YOLOX.
 
-Format: JSON lines, one line per frame (UTF-8)::
+Format: JSON lines, one line per frame (UTF-8, a byte-order mark allowed)::
 
     {"frame": 0, "detections": [{"label": "car", "score": 0.9, "box": [x1, y1, x2, y2]}, ...]}
 
 - `frame` is the 0-based index of the frame in the sequence; each frame appears at most once, in any order.
   Frames absent from the file have no detections.
-- `box` is in pixels of the left image, x1 < x2 and y1 < y2; `score` is in [0, 1].
+- `box` is in pixels of the left image, x1 < x2 and y1 < y2; `score` is in [0, 1] (the checks of
+  `neoslam.io.detection_checks`, shared with a simulated dataset's detections.csv).
 - Other keys (on a line or in a detection) are ignored, so that a detector may add its own.
 - Blank lines are skipped, and an empty file is allowed: it is what a detector that found nothing writes,
   and what `write_detections_file` writes for no frames.
@@ -18,7 +19,6 @@ Any other problem is an `InputError` naming the file and the line.
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -26,20 +26,22 @@ from typing import Any
 import numpy as np
 
 from neoslam.errors import InputError
+from neoslam.io.detection_checks import box_problem, label_problem, score_problem
+from neoslam.io.text import read_text
 from neoslam.perception.detection import Detection
 
 __all__ = ["DetectionsFile", "write_detections_file", "parse_line"]
-
-BOX_LENGTH = 4
-SCORE_RANGE = (0.0, 1.0)
 
 
 class DetectionsFile:
     """The detections of a JSON-lines file, read and checked whole when opened; `detect` looks a frame up."""
 
-    def __init__(self, path: str | Path, classes: Iterable[str]) -> None:
+    def __init__(self, path: str | Path, classes: Iterable[str], frame_count: int | None = None) -> None:
+        """`frame_count`: the frames of the sequence; a line of a frame beyond them is refused with its line (most
+        likely the detections of another sequence)."""
         self.path = Path(path)
         self.classes = frozenset(classes)
+        self.frame_count = frame_count
         self._frames = self._read()
 
     @property
@@ -58,12 +60,7 @@ class DetectionsFile:
         return [d for d in (_clip(d, image.shape[1], image.shape[0]) for d in detections) if d is not None]
 
     def _read(self) -> dict[int, list[Detection]]:
-        try:
-            lines = self.path.read_text(encoding="utf-8").splitlines()
-        except FileNotFoundError:
-            raise InputError(self.path, "detections file not found") from None
-        except (OSError, UnicodeDecodeError) as error:
-            raise InputError(self.path, f"cannot read the detections file ({error})") from error
+        lines = read_text(self.path, missing="detections file not found").splitlines()
         frames: dict[int, list[Detection]] = {}
         for number, line in enumerate(lines, start=1):
             if not line.strip():
@@ -74,6 +71,9 @@ class DetectionsFile:
                 raise InputError(self.path, str(error), line=number) from error
             if frame in frames:
                 raise InputError(self.path, f"frame {frame} appears twice", line=number)
+            if self.frame_count is not None and frame >= self.frame_count:
+                problem = f"frame {frame} is beyond the {self.frame_count} frames of the sequence"
+                raise InputError(self.path, problem, line=number)
             frames[frame] = [d for d in detections if d.label in self.classes]
         return frames
 
@@ -84,6 +84,9 @@ def parse_line(line: str) -> tuple[int, list[Detection]]:
         record = json.loads(line)
     except json.JSONDecodeError as error:
         raise ValueError(f"not JSON ({error.msg} at column {error.colno})") from error
+    except RecursionError:
+        # json's parser recurses per nesting level: a line nested thousands deep is no detection record.
+        raise ValueError("not a detections record (JSON nested too deeply)") from None
     if not isinstance(record, dict):
         raise ValueError('a line must be a JSON object {"frame": ..., "detections": [...]}')
     frame = _required(record, "frame", "line")
@@ -100,17 +103,11 @@ def _parse_detection(item: Any, index: int) -> Detection:
     if not isinstance(item, dict):
         raise ValueError(f'{where}: must be an object {{"label": ..., "score": ..., "box": [...]}}')
     label = _required(item, "label", where)
-    if not isinstance(label, str) or not label:
-        raise ValueError(f'{where}: "label" must be a non-empty string, got {label!r}')
     score = _required(item, "score", where)
-    if not _is_number(score) or not SCORE_RANGE[0] <= score <= SCORE_RANGE[1]:
-        raise ValueError(f'{where}: "score" must be a number in [0, 1], got {score!r}')
     box = _required(item, "box", where)
-    if not isinstance(box, list) or len(box) != BOX_LENGTH or not all(_is_number(v) for v in box):
-        raise ValueError(f'{where}: "box" must be 4 finite numbers [x1, y1, x2, y2], got {box!r}')
-    x1, y1, x2, y2 = box
-    if x2 <= x1 or y2 <= y1:
-        raise ValueError(f'{where}: "box" must have x1 < x2 and y1 < y2, got {box!r}')
+    problem = label_problem(label) or score_problem(score) or box_problem(box)
+    if problem is not None:
+        raise ValueError(f"{where}: {problem}")
     return Detection(label, float(score), np.array(box, dtype=np.float64))
 
 
@@ -122,11 +119,6 @@ def _required(record: dict[str, Any], key: str, where: str) -> Any:
 
 def _is_int(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)  # JSON true is not frame 1
-
-
-def _is_number(value: Any) -> bool:
-    # json.loads accepts NaN and Infinity, which are not valid scores or coordinates.
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def _clip(detection: Detection, width: int, height: int) -> Detection | None:

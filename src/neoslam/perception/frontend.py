@@ -15,11 +15,12 @@ from typing import Protocol
 
 import numpy as np
 
-from neoslam.config import CameraConfig
+from neoslam.config import CameraConfig, MotionLimitsConfig
 from neoslam.errors import ConfigError, InputError
 from neoslam.geometry import body_velocities, invert_pose
 from neoslam.io.frames import camera_poses_to_robot
-from neoslam.io.trajectory_files import read_trajectory
+from neoslam.io.motion_limits import check_pose_steps
+from neoslam.io.trajectory_files import data_line_numbers, read_trajectory
 from neoslam.perception.config import PerceptionConfig
 from neoslam.perception.detection import ObjectDetector
 from neoslam.perception.detections_file import DetectionsFile
@@ -158,18 +159,16 @@ class ImageDataset:
 
 
 def _detections_file(path: Path, config: PerceptionConfig, frames: int) -> DetectionsFile:
-    detections = DetectionsFile(path, config.detector.classes)
-    beyond = [frame for frame in detections.frames if frame >= frames]
-    if beyond:
-        # Most likely the detections of another sequence: refuse rather than drop them silently.
-        raise InputError(path, f"frame {beyond[0]} is beyond the {frames} frames of the sequence")
-    return detections
+    # A frame beyond the sequence is most likely another sequence's: the file refuses it, naming its line.
+    return DetectionsFile(path, config.detector.classes, frame_count=frames)
 
 
-def _pose_file_motion(path: Path, frames: int) -> PoseFileMotion:
+def _pose_file_motion(path: Path, timestamps: np.ndarray, limits: MotionLimitsConfig) -> PoseFileMotion:
     trajectory = read_trajectory(path, "auto")
-    if len(trajectory) != frames:
-        raise InputError(path, f"{len(trajectory)} poses for the {frames} frames of the sequence")
+    if len(trajectory) != len(timestamps):
+        raise InputError(path, f"{len(trajectory)} poses for the {len(timestamps)} frames of the sequence")
+    # The frames' velocities are the pose steps over the sequence's own time steps: check those.
+    check_pose_steps(path, Trajectory(timestamps, trajectory.poses), limits, data_line_numbers(path))
     return PoseFileMotion(trajectory)
 
 
@@ -177,9 +176,12 @@ def open_front_end(
     sequence: StereoSequence,
     config: PerceptionConfig,
     detections: Path | None = None,
-    odometry: Path | None = None,
+    odometry: Path | Trajectory | None = None,
+    limits: MotionLimitsConfig | None = None,
 ) -> ImageDataset:
-    """The front end the config asks for: a YOLO model or a detections file, stereo odometry or a pose file."""
+    """The front end the config asks for: a YOLO model or a detections file, stereo odometry or poses (a pose
+    file, checked against the motion limits, or a Trajectory of one pose per frame such as a bag's odometry
+    topic)."""
     if detections is not None or config.detector.source == "file":
         if detections is None:
             raise ConfigError("perception.detector.source is 'file': give the detections with --detections FILE")
@@ -189,7 +191,11 @@ def open_front_end(
     if odometry is not None or config.odometry.source == "poses":
         if odometry is None:
             raise ConfigError("perception.odometry.source is 'poses': give the pose file with --odometry FILE")
-        motion: MotionSource = _pose_file_motion(odometry, len(sequence))
+        if isinstance(odometry, Trajectory):
+            motion: MotionSource = PoseFileMotion(odometry)
+        else:
+            stamps = np.asarray(sequence.timestamps, dtype=float)
+            motion = _pose_file_motion(odometry, stamps, limits or MotionLimitsConfig())
     else:
         motion = StereoMotion(StereoOdometry(sequence.camera, config.odometry))
     triangulator = ObjectTriangulator(sequence.camera, config.stereo)

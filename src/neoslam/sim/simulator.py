@@ -32,15 +32,23 @@ class SimulatedRecording:
 
 
 def simulate(
-    truth: Trajectory, config: SimulatorConfig, name: str, source: str, progress: bool = False, route=None
+    truth: Trajectory,
+    config: SimulatorConfig,
+    name: str,
+    source: str,
+    progress: bool = False,
+    route=None,
+    world_along: Trajectory | None = None,
 ) -> SimulatedRecording:
-    """Place a world along `truth`, then record odometry and detections at every pose. Deterministic in seed."""
+    """Place a world along `truth` (or along `world_along`: the streets of a drive that goes round them several
+    times, see neoslam.sim.passes, so that one pass and many see the same world), then record odometry and
+    detections at every pose of `truth`. Deterministic in seed."""
     # One independent stream per concern, so that changing, say, the detection noise leaves the world unchanged.
     world_rng, odometry_rng, detection_rng = (
         np.random.default_rng(s) for s in np.random.SeedSequence(config.seed).spawn(3)
     )
     world = build_world(
-        truth,
+        truth if world_along is None else world_along,
         config.world,
         config.detection,
         config.camera.height_above_ground,

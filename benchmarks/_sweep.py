@@ -1,0 +1,40 @@
+"""Benchmarks as sweeps: the options every sweep-based benchmark takes, and running its spec."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from neoslam.sweep import SweepResult, make_executor, parse_spec, run_sweep
+from neoslam.sweep.spec import Spec
+
+SPECS = Path(__file__).resolve().parent / "specs"
+
+
+def sweep_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--out", type=Path, help="sweep folder to keep (and resume); default: a temporary one")
+    parser.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
+    parser.add_argument("--ray", metavar="ADDRESS", help="run the cells as Ray tasks on this cluster")
+
+
+def with_changes(spec: Spec, **changes) -> Spec:
+    """The spec with some fields replaced, checked again."""
+    values = spec.model_dump(exclude_unset=True) | changes
+    return parse_spec(values, spec.origin, spec.base_dir)
+
+
+@contextmanager
+def run_spec(spec: Spec, args: argparse.Namespace, measure=None) -> Iterator[SweepResult]:
+    """Run the spec (the defaults of the config, whatever NEOSLAM_* variables are set) into --out or a temporary
+    folder, which lasts as long as the block."""
+    executor = make_executor(args.ray, args.workers)
+    progress = sys.stderr.isatty()
+    if args.out is not None:
+        yield run_sweep(spec, args.out, executor, progress=progress, measure=measure, environ={})
+        return
+    with tempfile.TemporaryDirectory(prefix=f"{spec.name}-") as folder:
+        yield run_sweep(spec, Path(folder) / "sweep", executor, progress=progress, measure=measure, environ={})

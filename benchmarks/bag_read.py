@@ -1,0 +1,103 @@
+"""Reading stereo frames from ROS bags against reading them from the KITTI folder (issue 14).
+
+The 51 frames of kitti_06_51 are written as a ROS 1 bag and as ROS 2 bags (sqlite3 and mcap; mono8 Images, and
+one with the right camera's PNG files as CompressedImage) with the tests' writer (tests/bags/conftest.py). For each
+input: the time to open it (for a bag: index every stamp and decode the first pair), the median time to read one
+stereo pair (several passes, the first a warm-up), its size, and whether every pixel equals the KITTI folder's.
+
+    python benchmarks/bag_read.py [--quick] [--json FILE]
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import REPO_ROOT, data_root, markdown_table, parse_args, write_json  # noqa: E402
+from neoslam.datasets.bag import open_bag  # noqa: E402
+from neoslam.datasets.kitti import read_kitti_sequence  # noqa: E402
+from neoslam.perception.config import BagConfig  # noqa: E402
+
+PASSES, QUICK_PASSES = 4, 2
+BAGS = {  # name: (file or folder name, kind, right camera as CompressedImage)
+    "ROS 1 .bag, Image mono8": ("kitti.bag", "ros1", False),
+    "ROS 2 sqlite3, Image mono8": ("kitti_sqlite3", "sqlite3", False),
+    "ROS 2 mcap, Image mono8": ("kitti_mcap", "mcap", False),
+    "ROS 2 sqlite3, right CompressedImage PNG": ("kitti_png", "sqlite3", True),
+}
+
+
+def _bag_writer():
+    """The tests' bag writer (rosbags' ROS 1 and ROS 2 writers), loaded from its file."""
+    spec = importlib.util.spec_from_file_location("bag_writer", REPO_ROOT / "tests" / "bags" / "conftest.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.write_stereo_bag
+
+
+def _size_mb(path: Path) -> float:
+    files = [path] if path.is_file() else [p for p in path.rglob("*") if p.is_file()]
+    return sum(p.stat().st_size for p in files) / 1e6
+
+
+def _read_times(sequence, passes: int) -> np.ndarray:
+    times = []
+    for repeat in range(passes):
+        for index in range(len(sequence)):
+            start = time.perf_counter()
+            sequence.stereo_pair(index)
+            if repeat:  # the first pass warms the caches
+                times.append(time.perf_counter() - start)
+    return np.array(times)
+
+
+def main() -> None:
+    args = parse_args(__doc__.splitlines()[0])
+    passes = QUICK_PASSES if args.quick else PASSES
+    root = data_root() / "kitti_06_51"
+    start = time.perf_counter()
+    kitti = read_kitti_sequence(root, "06")
+    rows = [
+        {
+            "input": "KITTI folder, PNG files",
+            "open_ms": (time.perf_counter() - start) * 1e3,
+            "pair_ms_median": float(np.median(_read_times(kitti, passes))) * 1e3,
+            "size_mb": _size_mb(root / "sequences" / "06"),
+            "same_pixels": "-",
+        }
+    ]
+    write = _bag_writer()
+    with tempfile.TemporaryDirectory() as folder:
+        for name, (file_name, kind, compressed) in BAGS.items():
+            path = write(Path(folder) / file_name, kitti, len(kitti), kind, right_compressed=compressed)
+            start = time.perf_counter()
+            bag = open_bag(path, BagConfig())
+            open_ms = (time.perf_counter() - start) * 1e3
+            same = all(
+                np.array_equal(a, b)
+                for i in range(len(kitti))
+                for a, b in zip(bag.stereo_pair(i), kitti.stereo_pair(i), strict=True)
+            )
+            rows.append(
+                {
+                    "input": name,
+                    "open_ms": open_ms,
+                    "pair_ms_median": float(np.median(_read_times(bag, passes))) * 1e3,
+                    "size_mb": _size_mb(path),
+                    "same_pixels": "yes" if same else "NO",
+                }
+            )
+            bag.close()
+    print(f"{len(kitti)} stereo frames of kitti_06_51 (1226x370 grey), {passes - 1} timed passes\n")
+    print(markdown_table(rows, ["input", "open_ms", "pair_ms_median", "size_mb", "same_pixels"]))
+    write_json(args.json, {"frames": len(kitti), "rows": rows})
+
+
+if __name__ == "__main__":
+    main()

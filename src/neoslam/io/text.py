@@ -1,0 +1,35 @@
+"""Text input files, read one way everywhere: UTF-8 with an optional byte-order mark, one clear error otherwise.
+
+Every reader of a text format (CSV tables, TUM/KITTI files, JSON lines, YAML, calib.txt) goes through
+`read_text`, so that a file a Windows editor saved with a BOM is accepted by all of them alike, and a file that is
+not text is refused by all of them with the line of its first bad byte.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from neoslam.errors import InputError
+
+__all__ = ["read_text"]
+
+
+def read_text(path: Path, missing: str = "file not found") -> str:
+    """The file's text; InputError when it is missing (`missing` says so), a folder, unreadable or not UTF-8.
+
+    Line ends are kept as they are (csv needs "\\r\\n" inside quotes intact); `str.splitlines` handles all of them.
+    """
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise InputError(path, missing) from None
+    except IsADirectoryError:
+        raise InputError(path, "is a folder, not a file") from None
+    except OSError as error:
+        raise InputError(path, f"cannot be read ({error.strerror})") from None
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as error:
+        line = data[: error.start].count(b"\n") + 1
+        bad = data[error.start]
+        raise InputError(path, f"not a text file (not UTF-8: byte 0x{bad:02x})", line=line) from None

@@ -1,0 +1,162 @@
+"""The live view (`neoslam run --rerun`): a run recorded to an .rrd file and read back with Rerun's own reader has
+every entity, one row per frame on the `frame` and `time` timelines, and ends with the final map; without Rerun
+installed `--rerun` says how to install it; a bare `--rerun` spawns the viewer."""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from neoslam.cli import app
+
+BLOCK_FRAMES = 600  # the simulated block route to its first revisit: a few loop closures
+PER_FRAME = (
+    "camera/detections",
+    "world/robot",
+    "cells/head_direction",
+    "cells/grid_slice",
+    "metrics/objects",
+    "metrics/keyframes",
+    "metrics/loop_closures",
+    "metrics/experiences",
+    "metrics/observations",
+)
+MAP_LAYERS = ("world/trajectory/odometry", "world/trajectory/corrected", "world/objects", "world/keyframes")
+
+
+def _invoke(*args: object, env: dict[str, str] | None = None):
+    return CliRunner().invoke(app, [str(a) for a in args], env=env)
+
+
+def _ok(*args: object, env: dict[str, str] | None = None):
+    result = _invoke(*args, env=env)
+    assert result.exit_code == 0, result.output
+    return result
+
+
+def _simulate(root: Path, frames: int) -> Path:
+    from neoslam.config import NeoSLAMConfig
+    from neoslam.io.trajectory_files import write_tum
+    from neoslam.jobs import simulation_config
+    from neoslam.sim.routes import ROUTES, drive_route
+
+    sim = simulation_config(NeoSLAMConfig(), "vo", 2, "ideal").simulator
+    truth = drive_route(ROUTES["block"], sim.frame_period, sim.camera.height_above_ground)
+    write_tum(root / "block.txt", truth.subset(np.arange(frames)))
+    args = ("--trajectory", root / "block.txt", "--noise", "vo", "--detector", "ideal", "--seed", 2)
+    _ok("simulate", *args, "--out", root / "data", "-q")
+    return root / "data"
+
+
+class Recording:
+    """An .rrd file read back with rerun.chunk.RrdReader: rows per entity, timelines, and each entity's last row."""
+
+    def __init__(self, path: Path) -> None:
+        import rerun as rr
+
+        self.rows: dict[str, int] = defaultdict(int)
+        self.timelines: dict[str, set[str]] = defaultdict(set)
+        self.last: dict[str, tuple[int, dict]] = {}
+        for chunk in rr.chunk.RrdReader(path).stream():
+            entity = chunk.entity_path.lstrip("/")
+            if chunk.is_static:
+                continue
+            self.rows[entity] += chunk.num_rows
+            self.timelines[entity].update(chunk.timeline_names)
+            for row in chunk.to_record_batch().to_pylist():
+                if entity not in self.last or row["frame"] >= self.last[entity][0]:
+                    self.last[entity] = (row["frame"], row)
+
+
+@pytest.fixture(scope="module")
+def rerun_module(extra):
+    rr = extra("rerun", "viewer")
+    rr.set_strict_mode(True)  # a logging mistake raises instead of warning
+    yield rr
+    rr.set_strict_mode(False)
+
+
+@pytest.fixture(scope="module")
+def block_run(rerun_module, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, Recording]:
+    root = tmp_path_factory.mktemp("rerun")
+    data = _simulate(root, BLOCK_FRAMES)
+    _ok("run", data, "--rerun", root / "out" / "block.rrd", "--out", root / "out", "-q")  # in the results folder
+    metrics = json.loads((root / "out" / "metrics.json").read_text())
+    return root / "out", metrics, Recording(root / "out" / "block.rrd")
+
+
+def test_every_frame_is_logged_on_both_timelines(block_run) -> None:
+    _, metrics, recording = block_run
+    assert metrics["frames"] == BLOCK_FRAMES and metrics["loops"]["accepted"] > 0
+    for entity in PER_FRAME:
+        assert recording.rows[entity] == BLOCK_FRAMES, entity
+        assert {"frame", "time"} <= recording.timelines[entity], entity
+    assert recording.rows["metrics/frame_ms"] == BLOCK_FRAMES - 1  # the time between two frames
+    assert "camera/image" not in recording.rows  # a simulated dataset has no images
+
+
+def test_the_map_layers_end_with_the_final_map(block_run) -> None:
+    out, metrics, recording = block_run
+    for entity in (*MAP_LAYERS, "world/loop_closures"):
+        assert 0 < recording.rows[entity] < BLOCK_FRAMES, entity  # logged when the map changes, not every frame
+        assert recording.last[entity][0] == BLOCK_FRAMES - 1, entity
+    last = {entity: row for entity, (_, row) in recording.last.items()}
+    assert len(last["world/objects"]["Points3D:positions"]) == metrics["objects"]
+    assert len(last["world/keyframes"]["Points3D:positions"]) == metrics["keyframes"]
+    assert len(last["world/loop_closures"]["LineStrips3D:strips"]) == metrics["loops"]["accepted"]
+    corrected = np.array(last["world/trajectory/corrected"]["LineStrips3D:strips"][0])
+    trajectory = np.loadtxt(out / "trajectory_tum.txt")[:, 1:4]
+    np.testing.assert_allclose(corrected, trajectory, atol=1e-5)  # float32 in the recording
+    assert last["metrics/loop_closures"]["Scalars:scalars"] == [metrics["loops"]["accepted"]]
+
+
+def test_the_results_folder_holds_the_pose_graph(block_run) -> None:
+    out, metrics, _ = block_run
+    lines = (out / "experience_map.g2o").read_text().splitlines()
+    assert sum(line.startswith("VERTEX_SE3:QUAT ") for line in lines) == metrics["experience_map"]["experiences"]
+    assert sum(line.startswith("EDGE_SE3:QUAT ") for line in lines) == metrics["experience_map"]["links"]
+
+
+def test_an_image_sequence_logs_its_left_images(rerun_module, shared_data: Path, tmp_path: Path) -> None:
+    model = shared_data / "models" / "yolox_nano_coco" / "yolox_nano.onnx"
+    env = {"NEOSLAM_PERCEPTION__DETECTOR__MODEL": str(model)}
+    root = shared_data / "kitti_mini"
+    _ok("run", root, "--sequence", "06", "--out", tmp_path / "out", "--rerun", tmp_path / "mini.rrd", "-q", env=env)
+    recording = Recording(tmp_path / "mini.rrd")
+    assert recording.rows["camera/image"] == recording.rows["camera/detections"] == 12
+    image = recording.last["camera/image"][1]
+    assert image["EncodedImage:media_type"] == ["image/jpeg"]
+    labels = recording.last["camera/detections"][1]["Boxes2D:labels"] or []  # "car 0.87": class and score
+    assert all(label.split()[0] in ("car", "truck", "bicycle", "person") for label in labels)
+
+
+def test_a_bare_rerun_spawns_the_viewer(rerun_module, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    spawned = []
+    monkeypatch.setattr(rerun_module.RecordingStream, "spawn", lambda self, **kwargs: spawned.append(kwargs))
+    data = _simulate(tmp_path, 30)
+    _ok("run", data, "--out", tmp_path / "out", "--rerun", "-q")
+    _ok("run", data, "--rerun", "--out", tmp_path / "out2", "-q")  # DATA before it is not taken as the file
+    assert len(spawned) == 2
+
+
+def test_a_recording_must_end_in_rrd(rerun_module, tmp_path: Path) -> None:
+    result = _invoke("run", tmp_path / "nowhere", "--rerun=notes.txt", "--out", tmp_path / "out", "-q")
+    assert result.exit_code == 2
+    assert result.stderr.strip().splitlines() == ["neoslam: error: --rerun takes no value (spawn the viewer) or a "
+                                                  "file ending .rrd, not 'notes.txt'"]  # fmt: skip
+
+
+def test_without_the_viewer_extra_rerun_says_how_to_install_it(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setitem(sys.modules, "rerun", None)  # import rerun now fails as if it were not installed
+    data = _simulate(tmp_path, 30)
+    result = _invoke("run", data, "--rerun", tmp_path / "run.rrd", "--out", tmp_path / "out", "-q")
+    assert result.exit_code == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and 'pip install "neoslam[viewer]"' in lines[0]
+    assert not (tmp_path / "out").exists() and not (tmp_path / "run.rrd").exists()
