@@ -573,6 +573,7 @@ class ExperienceMapConfig(_Section):
     reuse_radius: float = Field(
         5.0,
         gt=0,
+        le=1000,
         description="re-enter an experience this close to the corrected pose, m (keyframes.spacing: the stored "
         "keyframe nearest to a new one on a street driven again is within a spacing; at 3 m, passes of KITTI 00 "
         "still stored keyframes 3-4 m from a stored one)",
@@ -587,17 +588,19 @@ class ExperienceMapConfig(_Section):
     reentry_distance: float = Field(
         1.5,
         gt=0,
+        le=1000,
         description="a closure re-enters the stored keyframe's experience only if it puts the robot within this of "
         "where the map has it (ground plane), m (3 loop_sigma); otherwise the map is off (the robot comes back after "
         "a long loop) and the keyframe is stored with a new experience and a loop link that corrects it, as the "
         "paper does",
     )
     reentry_yaw_deg: float = Field(
-        3.0, gt=0, description="and turned within this of where the map has it, degrees (about 3 loop_yaw_sigma)"
+        3.0, gt=0, le=180, description="and turned within this of where the map has it, degrees (3 loop_yaw_sigma)"
     )
     localised_distance: float = Field(
         100.0,
         ge=0,
+        le=1e6,
         description="the robot knows where it is for this much travel after a recognised place, m (vo odometry "
         "drifts about 1 m in 100 m); 0: re-enter experiences only on a closure",
     )
@@ -615,18 +618,21 @@ class ObjectMapConfig(_Section):
     depth_sigma_at_1m: float = Field(
         0.0015,
         gt=0,
+        le=1,
         description="stereo depth std at 1 m, m (keyframes.depth_sigma_at_1m); grows with depth^2: observations are "
         "weighted by their inverse variance, and a far one is associated along its viewing ray within gate_sigmas",
     )
     position_sigma_floor: float = Field(
         0.3,
         gt=0,
+        le=1000,
         description="no observed centre is known better than this, m (it lies on the visible surface, which changes "
         "with the view): observations nearer than about 14 m weigh alike",
     )
     gate_sigmas: float = Field(
         2.0,
         gt=0,
+        le=100,
         description="an observation joins an object within this many depth stds along its viewing ray (at least "
         "association_radius) and association_radius across it: else a far, noisy view of a known object starts a "
         "new one, and a street driven every day collects copies",
@@ -634,6 +640,7 @@ class ObjectMapConfig(_Section):
     height_tolerance: float = Field(
         6.0,
         gt=0,
+        le=1000,
         description="an observation joins an object within this in height, m (at least association_radius; "
         "matching.max_vertical_offset): the association radius holds in the ground plane, where objects stand apart; "
         "the pose's height and pitch drift move a view 50 m away up or down by 2 m and more, while objects rarely "
@@ -642,6 +649,7 @@ class ObjectMapConfig(_Section):
     tentative_distance: float = Field(
         60.0,
         gt=0,
+        le=1e6,
         description="an object seen fewer than min_observations times is forgotten after this much travel without "
         "another sighting, m (keyframes.window_length): a false detection, or an object glimpsed once a pass, would "
         "otherwise pile up into an object on a street driven every day",

@@ -218,7 +218,7 @@ def _metrics(dataset: Dataset, result: RunResult, config: NeoSLAMConfig, wall_s:
         corrected = trajectory_metrics(result.estimate, truth, evaluation)
         metrics["ate_rmse_m"] = {"odometry": odometry["ate_rmse_m"], "corrected": corrected["ate_rmse_m"]}
         metrics["trajectory"] = {"alignment": evaluation.alignment, "odometry": odometry, "corrected": corrected}
-    keyframe_frames = np.array([k.frame_index for k in result.keyframes], dtype=int)
+    keyframe_frames = np.asarray(result.keyframe_frames, dtype=int)  # every keyframe made, stored or recognised
     metrics["loops"] = loop_metrics(result.loop_closures, truth, config.evaluation, keyframe_frames)
     metrics["keyframes"] = len(result.keyframes)
     experience_map = result.experience_map
