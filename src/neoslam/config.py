@@ -20,6 +20,7 @@ from neoslam.perception.config import PerceptionConfig
 
 __all__ = [
     "merge_settings",
+    "config_values",
     "CameraConfig",
     "WorldConfig",
     "DetectionNoiseConfig",
@@ -792,20 +793,27 @@ def _read_yaml_mapping(path: Path) -> dict[str, Any]:
     return loaded
 
 
-def load_config(path: Path | None = None, environ: dict[str, str] | None = None) -> NeoSLAMConfig:
-    """Defaults, then the YAML file, then NEOSLAM_* environment variables."""
+def config_values(path: Path | None = None, environ: Mapping[str, str] | None = None) -> dict[str, Any]:
+    """The settings a YAML file and then NEOSLAM_* environment variables give over the defaults, as a mapping
+    (checked: a bad value is a ConfigError naming the file or the variable), for callers that merge more on top."""
     values = _read_yaml_mapping(path) if path is not None else {}
     variables = dict(os.environ if environ is None else environ)
-    env = _env_overrides(variables)
+    merged = merge_settings(values, _env_overrides(variables))
     try:
         NeoSLAMConfig.model_validate(values)
     except ValidationError as error:
         raise ConfigError(f"{path or 'configuration'}: {describe_validation_error(error)}") from None
     try:
-        return NeoSLAMConfig.model_validate(merge_settings(values, env))
+        NeoSLAMConfig.model_validate(merged)
     except ValidationError as error:
         variable = _variable_for(error.errors()[0]["loc"], variables)
         raise ConfigError(f"environment variable {variable}: {describe_validation_error(error)}") from None
+    return merged
+
+
+def load_config(path: Path | None = None, environ: Mapping[str, str] | None = None) -> NeoSLAMConfig:
+    """Defaults, then the YAML file, then NEOSLAM_* environment variables."""
+    return NeoSLAMConfig.model_validate(config_values(path, environ))
 
 
 def dump_config(config: NeoSLAMConfig) -> str:

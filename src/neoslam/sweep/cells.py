@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cache
@@ -13,11 +12,11 @@ from itertools import product
 from pathlib import Path
 from typing import Any
 
-import yaml
 from pydantic import ValidationError
 
 import neoslam
-from neoslam.config import NOISE_PROFILES, NeoSLAMConfig, _env_overrides, merge_settings
+from neoslam.config import NOISE_PROFILES, NeoSLAMConfig, config_values, merge_settings
+from neoslam.errors import NeoSLAMError
 from neoslam.sweep.spec import AXES, Spec, _where
 
 __all__ = ["Source", "Cell", "Plan", "expand", "code_version", "content_hash"]
@@ -201,30 +200,12 @@ def _resolve_sources(spec: Spec) -> dict[str, Source]:
 
 
 def _base_values(spec: Spec, environ: Mapping[str, str] | None) -> dict[str, Any]:
-    """The spec's config file under the NEOSLAM_* environment variables, as given (not yet validated)."""
-    values: dict[str, Any] = {}
-    if spec.config is not None:
-        path = _existing(spec, spec.config, "config")
-        try:
-            loaded = yaml.safe_load(path.read_text()) or {}
-        except (yaml.YAMLError, UnicodeDecodeError) as error:
-            raise spec.error("config", f"{path}: not valid YAML ({error.__class__.__name__})") from None
-        if not isinstance(loaded, dict):
-            raise spec.error("config", f"{path}: a config file must hold a mapping of sections")
-        try:
-            NeoSLAMConfig.model_validate(loaded)
-        except ValidationError as error:
-            first = error.errors()[0]
-            raise spec.error("config", f"{path}: {_where(first['loc'])}: {first['msg']}") from None
-        values = loaded
-    env = _env_overrides(dict(os.environ if environ is None else environ))
+    """The spec's config file under the NEOSLAM_* environment variables, as `--config` reads them (checked)."""
+    path = _existing(spec, spec.config, "config") if spec.config is not None else None
     try:
-        NeoSLAMConfig.model_validate(merge_settings(values, env))
-    except ValidationError as error:
-        first = error.errors()[0]
-        variable = "NEOSLAM_" + "__".join(str(part) for part in first["loc"]).upper()
-        raise spec.error("", f"environment variable {variable}: {first['msg']}") from None
-    return merge_settings(values, env)
+        return config_values(path, environ)
+    except NeoSLAMError as error:
+        raise spec.error("config" if path is not None else "", str(error)) from None
 
 
 def _axis_values(noise: str | None, detector: str | None, seed: int | None) -> dict[str, Any]:
