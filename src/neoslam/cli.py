@@ -181,19 +181,39 @@ def run_command(
             '(needs pip install "neoslam\\[viewer]").',
         ),
     ] = None,
+    map_path: Annotated[
+        Path | None,
+        typer.Option(
+            "--map",
+            metavar="FILE",
+            help="Map file (SQLite) to start from and extend, created if missing; written as the run goes.",
+        ),
+    ] = None,
+    localise_only: Annotated[
+        bool, typer.Option("--localise-only", help="Relocalise in the --map and use it; change nothing in it.")
+    ] = False,
     config: ConfigOption = None,
     overwrite: OverwriteOption = False,
     quiet: QuietOption = False,
 ) -> None:
     """Run NeoSLAM on a simulated dataset, a KITTI image sequence or a ROS 1 / ROS 2 bag and write the results
-    folder (trajectories, object map, pose graph, metrics, plots)."""
+    folder (trajectories, object map, pose graph, metrics, plots); with --map, as a session of a kept map."""
     from neoslam.jobs import ImageInputs, run_dataset, with_backend
 
     try:
         settings = with_backend(load_config(config), backend)
         inputs = ImageInputs(sequence, detections, odometry, left_topic, right_topic, odometry_topic)
         metrics = run_dataset(
-            data, out, settings, overwrite, progress=not quiet, inputs=inputs, read=[config], rerun=rerun
+            data,
+            out,
+            settings,
+            overwrite,
+            progress=not quiet,
+            inputs=inputs,
+            read=[config],
+            rerun=rerun,
+            map_path=map_path,
+            localise_only=localise_only,
         )
     except (NeoSLAMError, OSError) as error:
         _fail(error)
@@ -204,6 +224,14 @@ def run_command(
     rows += [("frames per second", metrics["timing"]["fps"])]
     if metrics.get("perception"):
         rows += [("perception frames per second (median)", metrics["perception"]["fps_median"])]
+    if "session" in metrics:
+        session = metrics["session"]
+        relocalised = session["relocalised_frame"]
+        where = "map's frame" if session["frame"] == "map" else "its own frame (not relocalised)"
+        rows += [("map session", f"{session['id']} of {session['map']}, in the {where}")]
+        if session["id"] > 1:
+            rows += [("relocalised at frame", "never" if relocalised is None else relocalised)]
+            rows += [("closures with the stored map", session["map_closures"])]
     typer.echo(_table(rows))
 
 

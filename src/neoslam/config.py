@@ -657,6 +657,32 @@ class ObjectMapConfig(_Section):
     )
 
 
+class MapStoreConfig(_Section):
+    """A map kept in a file over several sessions (`neoslam run --map FILE`, beyond the paper)."""
+
+    synchronous: Literal["full", "normal"] = Field(
+        "full",
+        description="SQLite's synchronous setting for the map file (write-ahead log): full makes every committed "
+        "keyframe survive a power cut too; normal survives a killed process and keeps the file consistent after a "
+        "power cut, which may lose the last commits",
+    )
+    relocalisation_candidates: int = Field(
+        20,
+        gt=0,
+        le=100_000,
+        description="until a session has joined the stored map, each keyframe is matched in full against this many "
+        "stored keyframes, the best by signature over the whole map (its pose relative to the map is unknown)",
+    )
+    relocalisation_consecutive: int = Field(
+        3,
+        gt=0,
+        le=100,
+        description="a session joins the stored map only when this many consecutive keyframes relocalise in it "
+        "consistently (matching.consecutive within a session): a search over the whole map meets more look-alike "
+        "places than a drift-bounded one, and a wrong relocalisation is worse than none",
+    )
+
+
 class MotionLimitsConfig(_Section):
     """Motion no road vehicle makes: an input that claims it (frames.csv velocities, an --odometry pose file, a
     `simulate --trajectory` file) is refused with its file, line and value, instead of being integrated. It keeps
@@ -714,6 +740,7 @@ class NeoSLAMConfig(_Section):
     matching: MatchingConfig = MatchingConfig()
     experience_map: ExperienceMapConfig = ExperienceMapConfig()
     object_map: ObjectMapConfig = ObjectMapConfig()
+    map_store: MapStoreConfig = MapStoreConfig()
     evaluation: EvaluationConfig = EvaluationConfig()
     motion_limits: MotionLimitsConfig = MotionLimitsConfig()
 

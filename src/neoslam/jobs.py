@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterator, Sequence
+from contextlib import nullcontext
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol
@@ -38,6 +39,7 @@ from neoslam.pipeline import RunResult, run
 from neoslam.sim.profiles import DETECTION_PROFILES
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.sim.simulator import SimulatedRecording, simulate
+from neoslam.store.session import MapSession, check_map_path, map_session
 from neoslam.types import Frame, Trajectory
 from neoslam.viz.plots import (
     plot_error_along_route,
@@ -219,7 +221,7 @@ def _metrics(dataset: Dataset, result: RunResult, config: NeoSLAMConfig, wall_s:
         metrics["ate_rmse_m"] = {"odometry": odometry["ate_rmse_m"], "corrected": corrected["ate_rmse_m"]}
         metrics["trajectory"] = {"alignment": evaluation.alignment, "odometry": odometry, "corrected": corrected}
     keyframe_frames = np.asarray(result.keyframe_frames, dtype=int)  # every keyframe made, stored or recognised
-    metrics["loops"] = loop_metrics(result.loop_closures, truth, config.evaluation, keyframe_frames)
+    metrics["loops"] = loop_metrics(result.session_closures(), truth, config.evaluation, keyframe_frames)
     metrics["keyframes"] = len(result.keyframes)
     experience_map = result.experience_map
     metrics["experience_map"] = {
@@ -235,6 +237,34 @@ def _metrics(dataset: Dataset, result: RunResult, config: NeoSLAMConfig, wall_s:
     if isinstance(dataset, ImageDataset):
         metrics["perception"] = dataset.front_end.times.summary()
     return metrics
+
+
+def _session_metrics(session: MapSession, result: RunResult) -> dict[str, Any]:
+    """Which session of the map file the run was, and whether (at which frame) it relocalised in the stored map."""
+    record = result.session
+    in_map_frame = record.id == 1 or record.relocalised_frame is not None  # the first session's frame is the map's
+    return {
+        "id": record.id,
+        "map": str(session.path),
+        "localise_only": session.localise_only,
+        "relocalised_frame": record.relocalised_frame,
+        "frame": "map" if in_map_frame else "session",
+        "map_keyframes": len(session.stored.keyframes),
+        "map_closures": len(result.loop_closures) - len(result.session_closures()),
+    }
+
+
+def _observers(*observers):
+    """One step observer calling each given one in turn (None ones left out)."""
+    chosen = [observer for observer in observers if observer is not None]
+    if not chosen:
+        return None
+
+    def observe(slam, frame, pose) -> None:
+        for observer in chosen:
+            observer(slam, frame, pose)
+
+    return observe
 
 
 def _plot_alignment(estimate: Trajectory, truth: Trajectory) -> SimilarityTransform:
@@ -291,32 +321,56 @@ def run_dataset(
     inputs: ImageInputs = ImageInputs(),
     read: Sequence[Path | None] = (),
     rerun: str | None = None,
+    map_path: Path | None = None,
+    localise_only: bool = False,
 ) -> dict[str, Any]:
     """Run NeoSLAM on a dataset folder, KITTI sequence or ROS bag (or simulate the default scenario first) and
     write the results folder. `read` names further files the run reads (a config file), which the output must not
-    replace. `rerun`: "spawn" shows the run live in the Rerun viewer, a path ending .rrd records it there."""
+    replace. `rerun`: "spawn" shows the run live in the Rerun viewer, a path ending .rrd records it there.
+    `map_path`: a map file the run starts from and extends (created if missing; see neoslam.store), written as the
+    run goes; with `localise_only` the run uses it and changes nothing in it."""
     check_rerun_target(rerun)
-    with atomic_directory(out, overwrite, [data, *inputs.files(), *read]) as staging:
+    read_paths = [data, *inputs.files(), *read]
+    if map_path is not None:
+        check_map_path(map_path, out, read_paths, localise_only)
+    elif localise_only:
+        raise ConfigError("--localise-only needs --map FILE")
+    with atomic_directory(out, overwrite, read_paths) as staging:
         if data is None:
             write_dataset(staging / "dataset", record(config, route=DEFAULT_ROUTE, progress=progress))
             data = staging / "dataset"
         dataset = _load(data, config, inputs)
         viewer = recording_target(rerun, out, staging)
-        with rerun_session(viewer, dataset, overwrite, [data, *inputs.files(), *read]) as on_step:
+        kept = map_session(map_path, config, localise_only) if map_path is not None else nullcontext(None)
+        with kept as session, rerun_session(viewer, dataset, overwrite, [data, *inputs.files(), *read]) as on_step:
+            stored = session.stored if session is not None else None
+            recorder = session.recorder if session is not None else None
             start = time.perf_counter()
-            result = run(dataset.frames(), config, total=len(dataset), progress=progress, on_step=on_step)
+            result = run(
+                dataset.frames(),
+                config,
+                total=len(dataset),
+                progress=progress,
+                on_step=_observers(on_step, recorder),
+                stored=stored,
+                session_name=dataset.name,
+            )
             wall_s = time.perf_counter() - start
+            if recorder is not None:
+                recorder.finish()
         trajectories = {"trajectory": result.estimate, "odometry": result.odometry}
         if dataset.ground_truth is not None:
             trajectories["groundtruth"] = dataset.ground_truth
         write_trajectories(staging, trajectories)
-        write_loop_closures(staging / "loop_closures.csv", result.loop_closures)
+        write_loop_closures(staging / "loop_closures.csv", result.loop_closures, result.closure_sessions())
         write_objects(staging / "objects.csv", result.objects)
         write_object_vector_cells(staging, result.object_vector_cells)
         write_experience_map(staging / "experience_map.json", result.experience_map)
         write_g2o(staging / "experience_map.g2o", result.experience_map)
         write_config(staging / "config.yaml", config)
         metrics = _metrics(dataset, result, config, wall_s)
+        if session is not None:
+            metrics["session"] = _session_metrics(session, result)
         write_metrics(staging / "metrics.json", metrics)
         _plots(staging / "plots", result, dataset.ground_truth, config.matching.score_threshold)
     return metrics

@@ -4,6 +4,10 @@ Built so far: path integration in the head-direction and grid cells (paper 3.3, 
 loop closure by graph matching (3.2), the object-vector cells learning their firing field from keyframe objects
 (3.4), the Hebbian association of keyframes with the cells (3.5), and the object experience map corrected at each
 loop (3.6), whose corrected trajectory is the estimate.
+
+Beyond the paper, a run can start from a stored map (neoslam.store): it is a new session in its own frame until
+its keyframes relocalise in the stored map (searched whole), then the session joins the map's frame and its
+keyframes join the map. `map_state()` gives what a map file stores.
 """
 
 from __future__ import annotations
@@ -17,12 +21,15 @@ from tqdm import tqdm
 
 from neoslam.cells import GridCells, HeadDirectionCells, HebbianMemory, ObjectVectorCells, circular_difference
 from neoslam.cells.attractor import ShiftKernel, circular_mean, circular_shift
+from neoslam.cells.place import offset_in_cells
 from neoslam.config import NeoSLAMConfig
 from neoslam.geometry import invert_pose, planar_motion
 from neoslam.loop.detector import LoopClosureDetector
 from neoslam.loop.keyframes import KeyframeBuilder
 from neoslam.mapping.experience_map import CellState, ExperienceMap, Revisit
 from neoslam.mapping.object_map import MapObject, ObjectMap
+from neoslam.sessions import StoredMap
+from neoslam.store.records import MapState, SessionRecord
 from neoslam.types import Frame, Keyframe, LoopClosure, Trajectory
 
 __all__ = ["NeoSLAM", "RunResult", "StepObserver", "run", "object_vectors"]
@@ -42,13 +49,25 @@ class RunResult:
     keyframes: list[Keyframe]
     loop_closures: list[LoopClosure]
     recognised_keyframe: int | None  # the first stored keyframe that a closure recognised
-    recognised_scores: tuple[np.ndarray, np.ndarray]  # its spectral and verified scores against all (Fig. 4c)
+    # Ids of the keyframes the loop detector holds, and the recognised one's spectral and verified scores against
+    # each (Fig. 4c).
+    recognised_scores: tuple[np.ndarray, np.ndarray, np.ndarray]
     object_vector_cells: ObjectVectorCells
     hebbian: HebbianMemory
     frame_times_s: np.ndarray  # wall time of each step
     # Frame of every keyframe made, stored or recognised as a stored one (the query frames of loop recall);
-    # `keyframes` holds the stored ones, the map's.
+    # `keyframes` holds the stored ones this session made.
     keyframe_frames: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    session: SessionRecord = SessionRecord(1, "", 0, None)  # this run, in a map kept over sessions
+    first_keyframe: int = 0  # keyframes with lower ids are a stored map's (earlier sessions')
+
+    def closure_sessions(self) -> list[tuple[int, int]]:
+        """Per loop closure, this session and the session of the keyframe it recognised."""
+        return [(self.session.id, self.experience_map.session_of(c.match_keyframe)) for c in self.loop_closures]
+
+    def session_closures(self) -> list[LoopClosure]:
+        """The closures with keyframes of this session (their frames are this run's)."""
+        return [c for c in self.loop_closures if c.match_keyframe >= self.first_keyframe]
 
 
 def object_vectors(pose: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -60,13 +79,15 @@ def object_vectors(pose: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, n
 class NeoSLAM:
     """The whole system, one frame at a time."""
 
-    def __init__(self, config: NeoSLAMConfig) -> None:
+    def __init__(self, config: NeoSLAMConfig, stored: MapState | None = None, session_name: str = "") -> None:
+        """`stored`: a map to start from (this run is its next session), as neoslam.store reads it."""
         self.config = config
         self.grid_cells = GridCells(config.grid_cells)
         self.head_direction = HeadDirectionCells(config.head_direction)
         self.object_vector_cells = ObjectVectorCells(config.object_vector)
         self.hebbian = HebbianMemory(config.hebbian)
-        self.keyframes = KeyframeBuilder(config.keyframes)
+        stored = stored if stored is not None else MapState()
+        self.keyframes = KeyframeBuilder(config.keyframes, first_id=stored.next_keyframe)
         self.loop_detector = LoopClosureDetector(config.keyframes, config.matching)
         self.object_map = ObjectMap(config.object_map, config.keyframes.footprints)
         self.experience_map = ExperienceMap(config.experience_map, self.grid_cells.dims, config.head_direction.cells)
@@ -82,6 +103,8 @@ class NeoSLAM:
         # estimate (3x4 rows each), decoded cells (x, y, z, heading).
         self._chunks: list[np.ndarray] = []
         self._recorded = 0
+        self.stored_map = StoredMap(config, stored, session_name)
+        self.stored_map.restore(self)
 
     def step(self, frame: Frame) -> np.ndarray:
         """Process one frame (the paper's steps in order); returns the current pose estimate T_world_robot."""
@@ -94,7 +117,8 @@ class NeoSLAM:
         closures: list[LoopClosure] = []
         revisit = None
         if keyframe is not None:  # 3.2 matching; a stored keyframe seen again is not stored twice (lifelong)
-            closures = self.loop_detector.query(keyframe, self.keyframes.odometer_m)
+            closures = self._relocalise(frame.index, keyframe, odometry) + self._find_loops(keyframe)
+            cells = self._cell_state()  # relocalising in a stored map moves the cells to its frame
             revisit = self.experience_map.recognise(keyframe.id, closures, cells, odometry)
         self.experience_map.step(frame.index, odometry, velocities, cells, travelled_m, keyframe_id, revisit)  # 3.6
         if keyframe is not None:
@@ -109,6 +133,21 @@ class NeoSLAM:
         self.object_map.add(pose, frame.observations, anchor, anchor_from_robot, self.keyframes.odometer_m)
         self._record(frame, pose)
         return pose
+
+    def _find_loops(self, keyframe: Keyframe) -> list[LoopClosure]:
+        return self.loop_detector.query(keyframe, self.keyframes.odometer_m)
+
+    def _relocalise(self, frame_index: int, keyframe: Keyframe, odometry: np.ndarray) -> list[LoopClosure]:
+        return self.stored_map.relocalise(self, frame_index, keyframe, odometry)
+
+    @property
+    def frames_processed(self) -> int:
+        return self._recorded
+
+    def recentre_grid_decoding(self) -> None:
+        """The cells were set to a new state (relocalised in a stored map): the unwrapped decoded position goes on
+        from where it was, not by the jump."""
+        self._grid_centre = self.grid_cells.centre
 
     def _cell_state(self) -> CellState:
         return CellState(self.grid_cells.centre, self.head_direction.centre)
@@ -170,8 +209,9 @@ class NeoSLAM:
         against the cells as they are, after the recalls of the closures before it. A keyframe that is a stored
         one seen again is not stored again."""
         self._query_poses[keyframe.id] = keyframe.pose
-        for old in [k for k in self._query_poses if k < keyframe.id - self.config.matching.consecutive]:
-            del self._query_poses[old]  # the detector emits closures of the last `consecutive` keyframes only
+        kept = max(self.config.matching.consecutive, self.config.map_store.relocalisation_consecutive)
+        for old in [k for k in self._query_poses if k < keyframe.id - kept]:
+            del self._query_poses[old]  # the detectors emit closures of the last `consecutive` keyframes only
         every = self.config.hebbian.recall_on == "detected"
         for closure in closures:
             self.detected_closures.append(closure)
@@ -189,30 +229,25 @@ class NeoSLAM:
         is now, in the cells' own frame, with `recall_gain` times the cells' injection energy.
 
         The closure's fit puts its query keyframe in the stored keyframe's frame and the odometry since moves that
-        to the current keyframe (a closure can confirm an earlier keyframe). The stored head direction, not the
-        odometry's heading there, turns the offset into the cells' frame (after a recall the two differ by the
-        drift), and the pattern moves by fractional cells with the path integration's shift blend (a cell is 8 m
-        and 10 degrees)."""
-        if closure.match_keyframe not in self.hebbian:
+        to the current keyframe (a closure can confirm an earlier keyframe). The pattern moves by fractional cells
+        with the path integration's shift blend (a cell is 8 m and 10 degrees)."""
+        stored_keyframes = self.loop_detector.index.keyframes
+        if closure.match_keyframe not in self.hebbian or closure.match_keyframe not in stored_keyframes:
             return
         recall = self.hebbian.recall(closure.match_keyframe)
         if recall.strength <= 0:
             return
-        stored = self.loop_detector.index.keyframes[closure.match_keyframe]
+        stored = stored_keyframes[closure.match_keyframe]
         robot = closure.relative_pose @ invert_pose(self._query_poses[closure.query_keyframe]) @ keyframe.pose
         ring = self.head_direction.cells
         heading = circular_mean(recall.hd_indices, recall.hd_weights, ring) * self.head_direction.cell_angle
-        c, s = np.cos(heading), np.sin(heading)
-        x, y, _ = robot[:3, 3]
-        offset = np.array([c * x - s * y, s * x + c * y, (stored.pose[:3, :3] @ robot[:3, 3])[2]])
+        shift, turn = offset_in_cells(heading, stored.pose, robot, self.grid_cells, self.head_direction)
         gain = self.config.hebbian.recall_gain
         grid = self.config.grid_cells
-        shift = offset / self.grid_cells.cell_size_m
         gc_cells, gc_weights = _moved_pattern(
             recall.gc_cells, recall.gc_weights, self.grid_cells.dims, shift, grid.shift_kernel
         )
         self.grid_cells.inject_pattern(gc_cells, gc_weights, gain * grid.injection_energy)
-        turn = float(np.arctan2(robot[1, 0], robot[0, 0])) / self.head_direction.cell_angle
         hd = self.config.head_direction
         hd_cells, hd_weights = _moved_pattern(
             recall.hd_indices[:, None], recall.hd_weights, (ring,), np.array([turn]), hd.shift_kernel
@@ -240,13 +275,27 @@ class NeoSLAM:
         poses[:, :3] = self._record_columns(columns).reshape(-1, 3, 4)
         return poses
 
+    def own_keyframes(self) -> list[Keyframe]:
+        """The keyframes this session stored (the loop detector also holds those of a stored map it joined)."""
+        return [k for k in self.loop_detector.index.keyframes if k.id >= self.keyframes.first_id]
+
+    def map_state(self) -> MapState:
+        """What a map file stores: the stored map this run started from and what this session added to it."""
+        return self.stored_map.state(self)
+
+    def _scores(self, keyframe: Keyframe) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The ids of the keyframes the loop detector holds and a keyframe's matching scores against each."""
+        ids = np.array([k.id for k in self.loop_detector.index.keyframes], dtype=int)
+        return (ids, *self.loop_detector.scores(keyframe))
+
     def result(self, frame_times_s: np.ndarray) -> RunResult:
         self.experience_map.finish()  # links still waiting for the pose graph
         self.object_map.refresh(self.experience_map.graph.poses, force=True)  # the last merges, on the final map
         stamps = self._record_columns(slice(0, 1))[:, 0]
         stored = self.loop_detector.index.keyframes
-        recognised = min((c.match_keyframe for c in self.loop_closures), default=None)
-        empty = (np.empty(0), np.empty(0))
+        own = [c.match_keyframe for c in self.loop_closures if c.match_keyframe >= self.keyframes.first_id]
+        recognised = min(own, default=None)
+        empty = (np.empty(0, dtype=int), np.empty(0), np.empty(0))
         odometry = self._recorded_poses(slice(1, 13))
         return RunResult(
             estimate=self.experience_map.trajectory(stamps, odometry),
@@ -255,14 +304,16 @@ class NeoSLAM:
             experience_map=self.experience_map,
             cell_states=self._record_columns(slice(25, 29)),
             objects=self.object_map.objects(self.experience_map.graph.poses),
-            keyframes=list(stored),
+            keyframes=self.own_keyframes(),
             loop_closures=list(self.loop_closures),
             recognised_keyframe=recognised,
-            recognised_scores=self.loop_detector.scores(stored[recognised]) if recognised is not None else empty,
+            recognised_scores=self._scores(stored[recognised]) if recognised is not None else empty,
             object_vector_cells=self.object_vector_cells,
             hebbian=self.hebbian,
             frame_times_s=frame_times_s,
             keyframe_frames=np.asarray(self.keyframes.frames, dtype=int),
+            session=self.stored_map.record(self),
+            first_keyframe=self.keyframes.first_id,
         )
 
 
@@ -287,10 +338,13 @@ def run(
     total: int | None = None,
     progress: bool = True,
     on_step: StepObserver | None = None,
+    stored: MapState | None = None,
+    session_name: str = "",
 ) -> RunResult:
     """Drive NeoSLAM over frames; wall time per frame is recorded for the timing block of metrics.json.
-    `on_step(slam, frame, pose)` is called after each step (a live view); its time is not counted as the step's."""
-    slam = NeoSLAM(config)
+    `on_step(slam, frame, pose)` is called after each step (a live view, a map file's commits); its time is not
+    counted as the step's. `stored`: a map to start from (this run is its next session)."""
+    slam = NeoSLAM(config, stored, session_name)
     times = []
     for frame in tqdm(frames, total=total, desc="neoslam", unit="frame", disable=not progress):
         start = time.perf_counter()

@@ -76,6 +76,7 @@ class Experience:
     linear_velocity: np.ndarray  # (3,)
     angular_velocity: np.ndarray  # (3,)
     keyframe_id: int | None = None
+    session: int = 1  # the session (run) that made it, in a map kept over several (neoslam.store)
 
 
 @dataclass(frozen=True, slots=True)

@@ -22,7 +22,7 @@ import numpy as np
 from neoslam.cells.attractor import peak_cell
 from neoslam.config import HebbianConfig
 
-__all__ = ["HebbianRecall", "HebbianMemory"]
+__all__ = ["HebbianMemory", "HebbianRecall", "HebbianTrace"]
 
 _INDEX_DTYPE = np.int32  # 36^3 = 46,656 grid cells; int32 holds any grid up to 2^31 cells
 _WEIGHT_DTYPE = np.float32
@@ -51,7 +51,9 @@ class HebbianRecall:
 
 
 @dataclass(slots=True)
-class _Trace:
+class HebbianTrace:
+    """One keyframe's association: the sparse max-marginals of β_k and the cell state it was learnt with."""
+
     gc_indices: np.ndarray
     gc_weights: np.ndarray
     hd_indices: np.ndarray
@@ -103,7 +105,7 @@ class HebbianMemory:
 
     def __init__(self, config: HebbianConfig | None = None) -> None:
         self.config = config or HebbianConfig()
-        self._traces: dict[int, _Trace] = {}
+        self._traces: dict[int, HebbianTrace] = {}
         self._gc_shape: tuple[int, int, int] | None = None
         self._hd_cells: int | None = None
 
@@ -124,6 +126,16 @@ class HebbianMemory:
             return 0
         cells = int(np.prod(self._gc_shape)) * self._hd_cells
         return len(self) * cells * np.dtype(_WEIGHT_DTYPE).itemsize
+
+    def traces(self) -> dict[int, HebbianTrace]:
+        """Every keyframe's association (a map file stores them)."""
+        return dict(self._traces)
+
+    def restore(self, traces: dict[int, HebbianTrace], gc_shape: tuple[int, int, int], hd_cells: int) -> None:
+        """Take the associations of a stored map (learnt with cells of these shapes)."""
+        self._traces.update(traces)
+        if traces:
+            self._gc_shape, self._hd_cells = gc_shape, hd_cells
 
     def associate(
         self, keyframe_id: int, template_activity: float, gc_activity: np.ndarray, hd_activity: np.ndarray
@@ -177,13 +189,13 @@ class HebbianMemory:
             )
         return gc_activity, hd_activity
 
-    def _trace(self, template_activity: float, gc_activity: np.ndarray, hd_activity: np.ndarray) -> _Trace:
+    def _trace(self, template_activity: float, gc_activity: np.ndarray, hd_activity: np.ndarray) -> HebbianTrace:
         """One association's sparse max-marginals of τ·O^k·P (eq. 14 against β = 0)."""
         gc_indices, gc_peak = _packet(gc_activity, self.config.sparsity, "grid-cell")
         hd_indices, hd_peak = _packet(hd_activity, self.config.sparsity, "head-direction")
         gain = self.config.learning_rate * template_activity  # τ·O^k
         x, y, z = peak_cell(gc_activity)
-        return _Trace(
+        return HebbianTrace(
             gc_indices=_read_only(gc_indices),
             gc_weights=_read_only(_marginal_weights(gc_activity, gc_indices, gain * hd_peak)),
             hd_indices=_read_only(hd_indices),
@@ -194,12 +206,12 @@ class HebbianMemory:
         )
 
 
-def _strongest(stored: _Trace, new: _Trace) -> _Trace:
+def _strongest(stored: HebbianTrace, new: HebbianTrace) -> HebbianTrace:
     """Eq. 14 for a known keyframe: element-wise max of the marginals; the cell state of the stronger association."""
     gc_indices, gc_weights = _max_union(stored.gc_indices, stored.gc_weights, new.gc_indices, new.gc_weights)
     hd_indices, hd_weights = _max_union(stored.hd_indices, stored.hd_weights, new.hd_indices, new.hd_weights)
     state = new if new.strength > stored.strength else stored  # ties keep the first: the place it was learnt
-    return _Trace(
+    return HebbianTrace(
         _read_only(gc_indices),
         _read_only(gc_weights),
         _read_only(hd_indices),

@@ -194,6 +194,15 @@ class ObjectVectorCells:
         """The network's weights and biases (W and b of eq. 12), as copies."""
         return {name: tensor.detach().clone() for name, tensor in self._network.state_dict().items()}
 
+    def weights(self) -> dict[str, np.ndarray]:
+        """The network's parameters as arrays, by name (a map file stores them)."""
+        return {name: tensor.detach().numpy().copy() for name, tensor in self._network.state_dict().items()}
+
+    def restore(self, weights: dict[str, np.ndarray], loss_history: list[float]) -> None:
+        """Take the parameters and the epochs learnt of a stored map: its epochs count towards `epochs`."""
+        self._network.load_state_dict({name: torch.from_numpy(np.array(value)) for name, value in weights.items()})
+        self.loss_history = [float(loss) for loss in loss_history]
+
     def save(self, path: str | Path) -> None:
         """Weights, optimiser and generator state, config and loss history, so training resumes exactly."""
         torch.save(

@@ -13,6 +13,7 @@ from neoslam.config import NeoSLAMConfig, dump_config
 from neoslam.errors import InputError
 from neoslam.geometry import pose_from_quaternion, quaternion_from_pose
 from neoslam.io.tables import numeric_column, read_table, write_table
+from neoslam.io.text import read_text
 from neoslam.io.trajectory_files import QUATERNION_NORM_TOLERANCE, write_kitti, write_tum
 from neoslam.mapping.object_map import MapObject
 from neoslam.types import LoopClosure, Trajectory
@@ -32,8 +33,9 @@ __all__ = [
 
 LOOP_COLUMNS = (
     "query_frame", "match_frame", "query_keyframe", "match_keyframe", "score", "matched_objects",
-    "tx", "ty", "tz", "qx", "qy", "qz", "qw",
+    "tx", "ty", "tz", "qx", "qy", "qz", "qw", "session", "match_session",
 )  # fmt: skip
+LOOP_COLUMNS_WITHOUT_SESSIONS = LOOP_COLUMNS[:-2]  # as written before maps were kept over sessions
 OBJECT_COLUMNS = ("id", "label", "x", "y", "z", "observations")
 
 
@@ -44,14 +46,16 @@ def write_trajectories(folder: Path, trajectories: dict[str, Trajectory]) -> Non
         write_kitti(folder / f"{name}_kitti.txt", trajectory)
 
 
-def write_loop_closures(path: Path, closures: list[LoopClosure]) -> None:
-    """One row per accepted closure; the relative transform T_match_query as translation and quaternion."""
+def write_loop_closures(path: Path, closures: list[LoopClosure], sessions: list[tuple[int, int]] | None = None) -> None:
+    """One row per accepted closure; the relative transform T_match_query as translation and quaternion; the
+    session of each keyframe (`sessions`, default 1 and 1: match_frame is a frame of the match's session)."""
     rows = []
-    for c in closures:
+    for c, (session, match_session) in zip(closures, sessions or [(1, 1)] * len(closures), strict=True):
         quaternion = quaternion_from_pose(c.relative_pose[None])[0]
         rows.append(
             [c.query_frame, c.match_frame, c.query_keyframe, c.match_keyframe, f"{c.score:.6f}", c.n_matches]
             + [f"{v:.6f}" for v in (*c.relative_pose[:3, 3], *quaternion)]
+            + [session, match_session]
         )
     write_table(path, LOOP_COLUMNS, rows)
 
@@ -86,6 +90,7 @@ def write_experience_map(path: Path, experience_map) -> None:
             "head_direction_cell": round(float(e.head_direction), 4),
             "pose": _pose_record(graph.poses[e.id]),
             "odometry_pose": _pose_record(e.pose),
+            "session": e.session,
         }
         for e in experience_map.experiences
     ]
@@ -140,12 +145,18 @@ def _check_loop_row(values: dict[str, np.ndarray], k: int, frames: int | None) -
 
 
 def read_loop_closures(path: Path, frames: int | None = None) -> list[LoopClosure]:
-    """Read loop_closures.csv back (for `neoslam evaluate --loops`); with `frames`, the length of the trajectory
+    """Read loop_closures.csv back (for `neoslam evaluate --loops`): the closures within one session (a closure
+    with an earlier session's keyframe names a frame of that session). With `frames`, the length of the trajectory
     the closures' frames index, a frame beyond it is refused with its line."""
-    rows = read_table(path, LOOP_COLUMNS)
-    values = {name: numeric_column(path, rows, LOOP_COLUMNS, name) for name in LOOP_COLUMNS}
+    columns = LOOP_COLUMNS
+    if read_text(path).lstrip("\ufeff").startswith(",".join(LOOP_COLUMNS_WITHOUT_SESSIONS) + "\n"):
+        columns = LOOP_COLUMNS_WITHOUT_SESSIONS
+    rows = read_table(path, columns)
+    values = {name: numeric_column(path, rows, columns, name) for name in columns}
     closures = []
     for k in range(len(rows)):
+        if "session" in values and values["session"][k] != values["match_session"][k]:
+            continue
         problem = _check_loop_row(values, k, frames)
         if problem is not None:
             raise InputError(path, problem, line=k + 2)

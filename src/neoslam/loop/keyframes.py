@@ -104,13 +104,14 @@ class LocalObjectWindow:
 class KeyframeBuilder:
     """Makes a keyframe every `spacing` metres of travel from the local window."""
 
-    def __init__(self, config: KeyframeConfig) -> None:
+    def __init__(self, config: KeyframeConfig, first_id: int = 0) -> None:
         self.config = config
         self.window = LocalObjectWindow(config)
         self.odometer_m = 0.0
         self._next_keyframe_m = 0.0
-        self._next_id = 0
-        self.frames = array("l")  # the frame of every keyframe made (ids are positions here)
+        self.first_id = first_id  # ids continue those of a stored map
+        self._next_id = first_id
+        self.frames = array("l")  # the frame of every keyframe made (id - first_id is the position here)
 
     def add(self, frame_index: int, pose: np.ndarray, observations, travelled_m: float) -> Keyframe | None:
         """Feed one frame (pose estimate and observations); returns a new keyframe when one is due."""

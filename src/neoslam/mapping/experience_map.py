@@ -21,20 +21,27 @@ robot knows where it is, and a new keyframe or a move of the cells that finds an
 of the corrected pose, heading the same way, re-enters that experience too (no link). Frames keep the experience
 they were in and where the robot entered it (a visit), so the trajectory is the same whichever way the map was
 built.
+
+Sessions (beyond the paper, neoslam.store): the map can start from a stored one (`restore`). The session's first
+experience then starts a part of the map of its own, in the session's frame; the first closure with a stored
+keyframe joins the two parts (`join`): the newer part moves rigidly to where the closure puts it in the older's
+frame. The grid-cell check compares experiences of one session only: two sessions' cells started apart.
 """
 
 from __future__ import annotations
 
 from array import array
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from neoslam.config import ExperienceMapConfig
 from neoslam.geometry import invert_pose, rotation_angle, yaw_of
 from neoslam.mapping.graph import Link, MapGraph
+from neoslam.mapping.parts import MapParts
 from neoslam.mapping.pose_graph import optimise_pose_graph
 from neoslam.mapping.relaxation import LinkMeasurement, link_measurement, relax
+from neoslam.store.records import MapState
 from neoslam.types import Experience, LoopClosure, Trajectory
 
 __all__ = ["CellState", "ExperienceMap", "Revisit"]
@@ -78,6 +85,8 @@ class ExperienceMap:
         self.head_direction_cells = float(head_direction_cells)
         self.experiences: list[Experience] = []
         self.graph = MapGraph()
+        self.parts = MapParts()
+        self.session = 1  # the session whose experiences this run makes
         self._measurements: list[LinkMeasurement] = []
         self._odometry_poses: list[np.ndarray] = []  # each experience's odometry pose when it was made
         self._by_keyframe: dict[int, int] = {}
@@ -131,7 +140,7 @@ class ExperienceMap:
         if revisit is not None:
             self._reenter(revisit, odometry_pose, cells, keyframe_id)
         elif (
-            not self.experiences
+            self._current < 0
             or keyframe_id is not None
             or (self._cells_moved_on(cells) and not self._reenter_nearby(odometry_pose, cells))
         ):
@@ -165,7 +174,9 @@ class ExperienceMap:
             linear_velocity=np.asarray(velocities[0]),
             angular_velocity=np.asarray(velocities[1]),
             keyframe_id=keyframe_id,
+            session=self.session,
         )
+        self.parts.add()
         if previous >= 0:  # place it where the odometry says, relative to the corrected previous experience
             relative = invert_pose(self._anchor) @ odometry_pose
             self.graph.add_node(self.graph.poses[previous] @ relative)
@@ -180,6 +191,7 @@ class ExperienceMap:
 
     def _link(self, link: Link) -> None:
         self.graph.add_link(link)
+        self.parts.link(link.source, link.target)
         self._measurements.append(link_measurement(self.graph, link))
         self._linked.add((min(link.source, link.target), max(link.source, link.target)))
 
@@ -187,9 +199,25 @@ class ExperienceMap:
         return (min(a, b), max(a, b)) in self._linked
 
     def _optimise(self) -> None:
+        """The pose graph of the robot's part of the map (the whole map unless it holds sessions not joined)."""
         self._unoptimised = 0
-        if self.config.backend == "pose-graph":
+        if self.config.backend != "pose-graph":
+            return
+        part = self.parts.members(self.parts.part_of(self.current))
+        if part.all():
             optimise_pose_graph(self.graph, self.config)
+            return
+        nodes = np.flatnonzero(part)
+        renumbered = np.full(len(part), -1)
+        renumbered[nodes] = np.arange(len(nodes))  # the part's first node, its frame's anchor, becomes node 0
+        links = [
+            replace(link, source=int(renumbered[link.source]), target=int(renumbered[link.target]))
+            for link in self.graph.links
+            if part[link.source]
+        ]
+        piece = MapGraph(self.graph.poses[nodes].copy(), links)
+        optimise_pose_graph(piece, self.config)
+        self.graph.poses[nodes] = piece.poses
 
     def finish(self) -> None:
         """Optimise the links still waiting (see BATCHED_LINKS): the map as the last frame leaves it."""
@@ -203,7 +231,7 @@ class ExperienceMap:
         `closures`, if the cells agree and it faces the stored keyframe's way; or, with no closure of its own while
         the robot knows where it is, the stored keyframe whose experience lies within `reuse_radius` of the
         corrected pose, heading the same way. None: a new keyframe (and experience)."""
-        if not self.config.reuse_places or not self.experiences:
+        if not self.config.reuse_places or self._current < 0:
             return None
         own = next((c for c in closures if c.query_keyframe == keyframe_id), None)
         pose = self.current_pose(odometry_pose)
@@ -233,7 +261,10 @@ class ExperienceMap:
         return bool(close and np.degrees(rotation_angle(error[:3, :3])) <= self.config.reentry_yaw_deg)
 
     def _cells_agree(self, cells: CellState, experience: int) -> bool:
-        """The paper's guard: the recognised experience's grid cells within gc_distance_threshold of the current."""
+        """The paper's guard: the recognised experience's grid cells within gc_distance_threshold of the current
+        (for an experience of this session: another session's cells started elsewhere)."""
+        if self.experiences[experience].session != self.session:
+            return True
         distance = np.linalg.norm(_circular(cells.grid, self.experiences[experience].grid_cell, self.grid_dims))
         return bool(distance <= self.config.gc_distance_threshold)
 
@@ -243,6 +274,7 @@ class ExperienceMap:
         distance = np.linalg.norm(poses[:, :3, 3] - pose[:3, 3], axis=1)
         turn = np.abs(np.angle(np.exp(1j * (yaw_of(poses) - yaw_of(pose)))))
         near = (distance <= self.config.reuse_radius) & (turn <= np.radians(self.config.reuse_max_turn_deg))
+        near &= self.parts.members(self.parts.part_of(self.current))  # another part's frame is not this one's
         if keyframes_only:
             near &= np.fromiter((e.keyframe_id is not None for e in self.experiences), bool, len(self.experiences))
         if not near.any():
@@ -288,7 +320,7 @@ class ExperienceMap:
     def _reenter_nearby(self, odometry_pose: np.ndarray, cells: CellState) -> bool:
         """While the robot knows where it is, enter the experience at the corrected pose instead of making one;
         returns whether there was one (staying in the current one counts)."""
-        if not self.config.reuse_places or not self.experiences or not self.localised:
+        if not self.config.reuse_places or self._current < 0 or not self.localised:
             return False
         pose = self.current_pose(odometry_pose)
         target = self._nearest(pose, keyframes_only=False)
@@ -309,6 +341,8 @@ class ExperienceMap:
         merged = self._merged.get(closure.query_keyframe) if query is None else None
         if stored is None or (query is None and merged is None):
             return False
+        if self.parts.part_of(stored) != self.parts.part_of(self.current):
+            return False  # a stored session's part not joined (see join): its frame is not this one's
         if not self._cells_agree(cells, stored):
             self.rejected_closures.append(closure)
             return False
@@ -326,15 +360,71 @@ class ExperienceMap:
         self._optimise()
         return True
 
+    def join(self, closure: LoopClosure, query_pose: np.ndarray) -> bool:
+        """If a closure's stored keyframe lies in another part of the map than the robot (a stored session, before
+        this one relocalised in it), move the newer of the two parts rigidly to where the closure puts it in the
+        older one's frame (in all six degrees of freedom: the parts' frames are their sessions' first poses, tilted
+        differently). `query_pose` is the closure's query keyframe pose in the map as it is (the robot's current
+        pose for the current keyframe). Returns whether the robot's own part moved (then its frame is the stored
+        part's)."""
+        stored = self._by_keyframe.get(closure.match_keyframe)
+        if stored is None or self._current < 0:
+            return False
+        here, there = self.parts.part_of(self.current), self.parts.part_of(stored)
+        if here == there:
+            return False
+        robot = self.graph.poses[stored] @ closure.relative_pose  # where the closure puts the robot, there
+        moved = robot @ invert_pose(query_pose)  # T_there_here
+        moving = here
+        if there > here:  # the stored part is the newer one: it moves into the robot's part's frame
+            moved, moving = invert_pose(moved), there
+        members = self.parts.members(moving)
+        self.graph.poses[members] = moved @ self.graph.poses[members]
+        self._measurements = [link_measurement(self.graph, link) for link in self.graph.links]
+        return moving == here
+
+    def restore(self, state: MapState, session: int) -> None:
+        """Start from a stored map: its experiences, corrected poses and links; this run's experiences belong to
+        `session` and start a part of the map of their own."""
+        self.session = session
+        self.experiences = list(state.experiences)
+        self.graph = MapGraph(np.array(state.experience_poses, dtype=float).reshape(-1, 4, 4), [])
+        self.parts = MapParts()
+        for _ in self.experiences:
+            self.parts.add()
+        for link in state.links:
+            self._link(link)
+        self._odometry_poses = [e.pose for e in self.experiences]
+        self._by_keyframe = dict(state.keyframe_experience)
+
     def correct(self) -> None:
         """Per frame: the paper's relaxation passes, once the map has a loop to relax."""
         if self.config.backend == "relaxation" and self.accepted_closures:
-            relax(self.graph, self._measurements, self.config.correction_factor, self.config.correction_loops)
+            measurements = self._measurements
+            if len(self.parts.roots()) > 1:  # the robot's part only: a stored session not joined stays as stored
+                part = self.parts.members(self.parts.part_of(self.current))
+                measurements = [m for m in measurements if part[m[0]]]
+            relax(self.graph, measurements, self.config.correction_factor, self.config.correction_loops)
+
+    @property
+    def keyframe_experiences(self) -> dict[int, int]:
+        """The experience of every keyframe stored (made with it)."""
+        return self._by_keyframe
+
+    def experience_of(self, keyframe_id: int) -> int:
+        return self._by_keyframe[keyframe_id]
+
+    def session_of(self, keyframe_id: int) -> int:
+        """The session that made a stored keyframe."""
+        return self.experiences[self._by_keyframe[keyframe_id]].session
+
+    def correction(self, experience: int) -> np.ndarray:
+        """T_map_odometry of an experience: from the odometry frame it was made in to the corrected map."""
+        return self.graph.poses[experience] @ invert_pose(self._odometry_poses[experience])
 
     def corrected_points(self, keyframe_id: int, points: np.ndarray) -> np.ndarray:
         """World points of a keyframe (odometry frame when it was made) in the corrected map."""
-        experience = self._by_keyframe[keyframe_id]
-        correction = self.graph.poses[experience] @ invert_pose(self._odometry_poses[experience])
+        correction = self.correction(self._by_keyframe[keyframe_id])
         return points @ correction[:3, :3].T + correction[:3, 3]
 
     def anchor(self, odometry_pose: np.ndarray) -> tuple[int, np.ndarray]:

@@ -29,6 +29,7 @@ from neoslam.config import ObjectMapConfig
 from neoslam.geometry import transform_points
 from neoslam.io.frames import camera_points_to_robot
 from neoslam.loop.keyframes import object_centres
+from neoslam.store.records import ObjectMapState
 from neoslam.types import ObjectObservation
 
 __all__ = ["MapObject", "ObjectMap"]
@@ -349,6 +350,46 @@ class ObjectMap:
         self._pair_object, self._pair_anchor = keys[:, 0].copy(), keys[:, 1].copy()
         self._pair_sums, self._pair_weights, self._pair_counts = sums, weights, counts
         self._pair_rows = {(int(o), int(a)): row for row, (o, a) in enumerate(keys)}
+
+    def state(self) -> ObjectMapState:
+        """The map's arrays (views, not copies: a map file writes them at once)."""
+        n, p = self._n, self._p
+        return ObjectMapState(
+            labels=self._labels,
+            sums=self._sums[:n],
+            weights=self._weights[:n],
+            counts=self._counts[:n],
+            pair_object=self._pair_object[:p],
+            pair_experience=self._pair_anchor[:p],
+            pair_sums=self._pair_sums[:p],
+            pair_weights=self._pair_weights[:p],
+            pair_counts=self._pair_counts[:p],
+        )
+
+    def restore(self, state: ObjectMapState) -> None:
+        """Take the objects of a stored map. Their positions follow the map from the first refresh on; an object
+        not yet confirmed when the map was stored is forgotten unless this session sees it again soon."""
+        self._labels = list(state.labels)
+        self._n, self._p = len(self._labels), len(state.pair_object)
+        self._sums = _grown(np.array(state.sums, float), self._n)
+        self._weights = _grown(np.array(state.weights, float), self._n)
+        self._counts = _grown(np.array(state.counts, dtype=int), self._n)
+        self._last_seen = np.zeros(len(self._counts))
+        self._pair_object = _grown(np.array(state.pair_object, dtype=int), self._p)
+        self._pair_anchor = _grown(np.array(state.pair_experience, dtype=int), self._p)
+        self._pair_sums = _grown(np.array(state.pair_sums, float), self._p)
+        self._pair_weights = _grown(np.array(state.pair_weights, float), self._p)
+        self._pair_counts = _grown(np.array(state.pair_counts, dtype=int), self._p)
+        pairs = zip(self._pair_object[: self._p], self._pair_anchor[: self._p], strict=True)
+        self._pair_rows = {(int(o), int(a)): row for row, (o, a) in enumerate(pairs)}
+        self._compacted_at = max(self._p, INITIAL_CAPACITY)
+        live = self._counts[: self._n] > 0
+        self._tentative = set(np.flatnonzero(live & (self._counts[: self._n] < self.config.min_observations)).tolist())
+        self._cells.clear()
+        self._cell_of.clear()
+        for index in np.flatnonzero(live):
+            self._place(int(index))
+        self._refreshed_positions = None  # the first refresh recomputes every object on the corrected map
 
     def objects(self, anchor_poses: np.ndarray | None = None) -> list[MapObject]:
         """Objects seen at least min_observations times (single sightings are mostly false positives); with

@@ -14,7 +14,7 @@ from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.sim.world import World, build_world
 from neoslam.types import Trajectory
 
-__all__ = ["SimulatedRecording", "simulate", "simulate_route"]
+__all__ = ["SimulatedRecording", "simulate", "simulate_route", "world_for"]
 
 
 @dataclass(frozen=True)
@@ -31,6 +31,20 @@ class SimulatedRecording:
     config: SimulatorConfig
 
 
+def _streams(seed: int) -> tuple[np.random.Generator, np.random.Generator, np.random.Generator]:
+    """The world, odometry and detection random streams of a seed: one independent stream per concern, so that
+    changing, say, the detection noise leaves the world unchanged (and a world given whole leaves the others)."""
+    world, odometry, detection = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(3))
+    return world, odometry, detection
+
+
+def world_for(truth: Trajectory, config: SimulatorConfig) -> World:
+    """The world `simulate(truth, config, ...)` would place along `truth` (same seed, same objects)."""
+    return build_world(
+        truth, config.world, config.detection, config.camera.height_above_ground, _streams(config.seed)[0]
+    )
+
+
 def simulate(
     truth: Trajectory,
     config: SimulatorConfig,
@@ -39,22 +53,22 @@ def simulate(
     progress: bool = False,
     route=None,
     world_along: Trajectory | None = None,
+    world: World | None = None,
 ) -> SimulatedRecording:
     """Place a world along `truth` (or along `world_along`: the streets of a drive that goes round them several
-    times, see neoslam.sim.passes, so that one pass and many see the same world), then record odometry and
-    detections at every pose of `truth`. Deterministic in seed."""
-    # One independent stream per concern, so that changing, say, the detection noise leaves the world unchanged.
-    world_rng, odometry_rng, detection_rng = (
-        np.random.default_rng(s) for s in np.random.SeedSequence(config.seed).spawn(3)
-    )
-    world = build_world(
-        truth if world_along is None else world_along,
-        config.world,
-        config.detection,
-        config.camera.height_above_ground,
-        world_rng,
-        repeats=route.repeats if route is not None else (),
-    )
+    times, see neoslam.sim.passes, so that one pass and many see the same world), or take `world` as it is (one
+    built for another drive, e.g. the shared world of several sessions, see neoslam.sim.sessions), then record
+    odometry and detections at every pose of `truth`. Deterministic in seed."""
+    world_rng, odometry_rng, detection_rng = _streams(config.seed)
+    if world is None:
+        world = build_world(
+            truth if world_along is None else world_along,
+            config.world,
+            config.detection,
+            config.camera.height_above_ground,
+            world_rng,
+            repeats=route.repeats if route is not None else (),
+        )
     linear, angular = noisy_odometry(truth, config.odometry, odometry_rng)
     detector = DetectionSimulator(world, config.camera, config.detection)
     stamps = tqdm(range(len(truth)), desc="simulate", unit="frame", disable=not progress)

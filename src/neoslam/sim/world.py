@@ -49,6 +49,28 @@ class World:
     def positions_at(self, time: float) -> np.ndarray:
         return self.positions + self.velocities * time
 
+    def moved(self, transform: np.ndarray) -> World:
+        """The same objects seen from another frame: x' = R x + t for the rigid (4, 4) `transform` [R | t].
+
+        Positions move as points (at time 0; a moving object moves on from there), velocities turn with R, and each
+        yaw becomes the heading of the object's length axis turned by R, projected onto the new ground plane. Objects
+        are upright boxes that have only a yaw, so a transform should be a yaw and a translation, with at most a small
+        roll and pitch (a road's few degrees, as between two poses of a KITTI drive): positions take that tilt
+        exactly, the boxes stay upright (their tilt is dropped). Sizes, labels and textures are unchanged."""
+        transform = np.asarray(transform, dtype=float)
+        if transform.shape != (4, 4):
+            raise ValueError(f"transform must be a (4, 4) matrix, got shape {transform.shape}")
+        rotation, translation = transform[:3, :3], transform[:3, 3]
+        axes = np.column_stack([np.cos(self.yaws), np.sin(self.yaws), np.zeros(len(self))]) @ rotation.T
+        return World(
+            labels=self.labels.copy(),
+            positions=self.positions @ rotation.T + translation,
+            sizes=self.sizes.copy(),
+            yaws=np.arctan2(axes[:, 1], axes[:, 0]).reshape(-1),
+            velocities=self.velocities @ rotation.T,
+            textures=self.textures.copy(),
+        )
+
 
 @dataclass(frozen=True)
 class _CentreLine:

@@ -103,19 +103,27 @@ def plot_ovcn_loss(path: Path, losses: list[float]) -> None:
 
 
 def plot_matching_scores(
-    path: Path, keyframe: int, scores: np.ndarray, verified: np.ndarray, threshold: float, recognised: list[int]
+    path: Path,
+    keyframe: int,
+    ids: np.ndarray,
+    scores: np.ndarray,
+    verified: np.ndarray,
+    threshold: float,
+    recognised: list[int],
 ) -> None:
-    """Scores of matching one keyframe against every stored keyframe (Fig. 4c): the spectral score XᵀMX / e_max of
-    every comparison, and the score of the matches that pass verification (zero elsewhere)."""
+    """Scores of matching one keyframe against every stored keyframe (ids, increasing; Fig. 4c): the spectral score
+    XᵀMX / e_max of every comparison, and the score of the matches that pass verification (zero elsewhere). The
+    `recognised` keyframes that closed a loop onto it are marked where they are stored (a keyframe recognised as a
+    stored one is not stored again)."""
     figure, axes = plt.subplots(figsize=(8, 4))
-    index = np.arange(len(scores))
-    axes.plot(index, scores, color="tab:gray", linewidth=0.7, label="spectral score")
-    axes.plot(index, verified, color="tab:blue", linewidth=1.2, label="verified score")
+    axes.plot(ids, scores, color="tab:gray", linewidth=0.7, label="spectral score")
+    axes.plot(ids, verified, color="tab:blue", linewidth=1.2, label="verified score")
     axes.axhline(
         threshold, color="tab:red", linestyle="--", linewidth=0.8, label=f"candidate threshold ({threshold:g})"
     )
-    if recognised:
-        axes.plot(recognised, verified[recognised], "o", color="tab:green", label="accepted closure")
+    shown = np.isin(ids, recognised)
+    if shown.any():
+        axes.plot(ids[shown], verified[shown], "o", color="tab:green", label="accepted closure")
     axes.set(xlabel="keyframe", ylabel="matching score", title=f"Matching keyframe {keyframe} against the map")
     axes.set_yscale("symlog", linthresh=1.0)
     axes.grid(alpha=0.3)

@@ -149,10 +149,11 @@ class RerunView:
         labels = [o.label for o in objects]
         texts = [f"{o.label} {o.id}" for o in objects]
         log("world/objects", rr.Points3D(positions, colors=_colours(labels), labels=texts, radii=0.5))
-        keyframes = slam.loop_detector.index.keyframes
-        centres = [experience_map.corrected_points(k.id, k.pose[None, :3, 3])[0] for k in keyframes]
+        # A keyframe's experience was made where it was (corrected): this holds for a stored map's keyframes too.
+        place = {k: experience_map.graph.poses[e][:3, 3] for k, e in experience_map.keyframe_experiences.items()}
+        centres = [place[k.id] for k in slam.loop_detector.index.keyframes]
         log("world/keyframes", rr.Points3D(np.array(centres).reshape(-1, 3), colors=[(255, 215, 0)], radii=0.8))
-        segments = [[corrected[c.match_frame], corrected[c.query_frame]] for c in slam.loop_closures]
+        segments = [[place[c.match_keyframe], corrected[c.query_frame]] for c in slam.loop_closures]
         log("world/loop_closures", rr.LineStrips3D(np.array(segments).reshape(-1, 2, 3), colors=[(255, 0, 255)]))
 
     def _log_cells(self, slam: Any) -> None:

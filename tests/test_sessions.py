@@ -1,0 +1,86 @@
+"""Two sessions in one simulated world (NeoSLAM with a stored map, in memory; the map file is tests/store and
+tests/test_cli_map.py): the second starts elsewhere, in its own frame, with its own noise, relocalises in the first
+one's map and ends in its frame; a session whose world the map never saw never joins it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from neoslam.config import NeoSLAMConfig
+from neoslam.datasets.simulated import read_dataset, write_dataset
+from neoslam.geometry import invert_pose
+from neoslam.jobs import simulation_config
+from neoslam.pipeline import NeoSLAM, RunResult
+from neoslam.sim.routes import ROUTES, drive_route
+from neoslam.sim.sessions import SessionRecording, session_recordings
+from neoslam.store.records import MapState
+
+TRUE_PLACE_M = 5.0  # a closure is true when its two frames are this close in the ground truth
+SAME_PLACE_M = 2.0  # a frame of B drives A's street when it passes this close to a frame of A (ground truth)
+
+
+def _drive(
+    session: SessionRecording, config: NeoSLAMConfig, stored: MapState | None, folder: Path
+) -> tuple[NeoSLAM, RunResult]:
+    """Session recorded to a dataset folder and read back (as a run reads it), then driven."""
+    write_dataset(folder, session.recording)
+    slam = NeoSLAM(config, stored, session.recording.name)
+    for frame in read_dataset(folder).frames():
+        slam.step(frame)
+    return slam, slam.result(np.zeros(0))
+
+
+@pytest.fixture(scope="module")
+def town_sessions() -> tuple[list[SessionRecording], NeoSLAMConfig]:
+    config = NeoSLAMConfig()
+    sim = simulation_config(config, "vo", 3).simulator
+    truth = drive_route(ROUTES["town"], sim.frame_period, sim.camera.height_above_ground)
+    return session_recordings(truth, [(0, 1800), (1300, len(truth))], sim, [3, 4], "town"), config
+
+
+def test_a_later_session_relocalises_in_the_stored_map_and_ends_in_its_frame(town_sessions, tmp_path):
+    (a, b), config = town_sessions
+    slam_a, result_a = _drive(a, config, None, tmp_path / "a")
+    stored = slam_a.map_state()
+    slam_b, result = _drive(b, config, stored, tmp_path / "b")
+    relocalised = result.session.relocalised_frame
+    assert result.session.id == 2 and relocalised is not None and relocalised < 400
+    # B's trajectory is in A's frame: where B drives A's streets, B's estimate lies where A's estimate has the same
+    # place (A's map is itself off the ground truth by its drift, which B inherits).
+    truth_in_a = invert_pose(a.start_pose) @ b.to_world(b.recording.truth.poses)
+    truth_a = a.recording.truth.poses
+    gaps = np.linalg.norm(truth_in_a[relocalised:, None, :2, 3] - truth_a[None, :, :2, 3], axis=2)
+    on_street = gaps.min(axis=1) < SAME_PLACE_M
+    same_place = gaps.argmin(axis=1)[on_street]
+    estimate_b = result.estimate.positions[relocalised:][on_street]
+    disagreement = np.linalg.norm(estimate_b - result_a.estimate.positions[same_place], axis=1)
+    assert on_street.sum() > 100 and np.median(disagreement) < 2.0, (on_street.sum(), np.median(disagreement))
+    # Every closure with the stored map joins true places.
+    map_closures = [c for c in result.loop_closures if c.match_keyframe < result.first_keyframe]
+    assert map_closures
+    for closure in map_closures:
+        gap = truth_in_a[closure.query_frame, :2, 3] - truth_a[closure.match_frame, :2, 3]
+        assert np.linalg.norm(gap) < TRUE_PLACE_M
+    # The session's keyframes and experiences joined the map with ids after the stored ones.
+    state = slam_b.map_state()
+    assert [s.id for s in state.sessions] == [1, 2] and state.sessions[1].relocalised_frame == relocalised
+    assert min(k.id for k in result.keyframes) == stored.next_keyframe
+    assert {e.session for e in state.experiences[len(stored.experiences) :]} == {2}
+    assert any(c.session == 2 and c.match_session == 1 for c in state.closures)
+
+
+def test_a_session_in_a_world_the_map_never_saw_never_joins_it(town_sessions, tmp_path):
+    (a, _), config = town_sessions
+    slam_a, _ = _drive(a, config, None, tmp_path / "a")
+    stored = slam_a.map_state()
+    poses = stored.experience_poses.copy()
+    other = simulation_config(config, "vo", 9).simulator  # another seed: another world of objects
+    truth = drive_route(ROUTES["block"], other.frame_period, other.camera.height_above_ground)
+    elsewhere = session_recordings(truth, [(0, len(truth))], other, [9], "block")[0]
+    slam_b, result = _drive(elsewhere, config, stored, tmp_path / "b")
+    assert result.session.relocalised_frame is None
+    assert result.loop_closures == result.session_closures()
+    assert np.array_equal(slam_b.map_state().experience_poses[: len(poses)], poses), "the stored part moved"
