@@ -37,6 +37,8 @@ __all__ = [
     "ObjectMapConfig",
     "EvaluationConfig",
     "MotionLimitsConfig",
+    "MapStoreConfig",
+    "MAP_SECTIONS",
     "PerceptionConfig",
     "NeoSLAMConfig",
     "load_config",
@@ -725,6 +727,20 @@ class EvaluationConfig(_Section):
     rpe_delta: float = Field(100.0, gt=0, le=1e6, description="RPE pair spacing")
     rpe_unit: Literal["frames", "m"] = Field("m", description="unit of rpe_delta")
     max_time_difference: float = Field(0.01, gt=0, le=1000, description="timestamp association tolerance, s")
+
+
+# The sections that shape a map (the cells, keyframes, matching and the maps): a map file is extended only with the
+# values it was made with (neoslam.store), and a sweep's cells that differ in these alone share one simulation.
+MAP_SECTIONS = (
+    "grid_cells",
+    "head_direction",
+    "object_vector",
+    "hebbian",
+    "keyframes",
+    "matching",
+    "experience_map",
+    "object_map",
+)
 
 
 class NeoSLAMConfig(_Section):

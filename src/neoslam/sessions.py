@@ -37,6 +37,7 @@ class StoredMap:
         self.stored = stored
         self.session = SessionRecord(stored.next_session, session_name, 0, None)
         self.relocaliser = MapRelocaliser(config.keyframes, config.matching, config.map_store, [])
+        self._weights: tuple[int, dict[str, np.ndarray]] = (-1, {})  # the OVCN's, by epochs learnt
 
     def restore(self, slam: NeoSLAM) -> None:
         """Start `slam` from the stored map: experiences, objects, associations and the OVCN as stored; the stored
@@ -143,6 +144,14 @@ class StoredMap:
             closures=[*self.stored.closures, *closures],
             objects=slam.object_map.state(),
             hebbian=slam.hebbian.traces(),
-            object_vector_weights=slam.object_vector_cells.weights(),
+            object_vector_weights=self._object_vector_weights(slam),
             object_vector_losses=slam.object_vector_cells.loss_history,
         )
+
+    def _object_vector_weights(self, slam: NeoSLAM) -> dict[str, np.ndarray]:
+        """The OVCN's weights, copied again only once it has learnt another epoch (a map is committed at every
+        keyframe, the OVCN learns a few epochs in all)."""
+        epochs = len(slam.object_vector_cells.loss_history)
+        if self._weights[0] != epochs:
+            self._weights = (epochs, slam.object_vector_cells.weights())
+        return self._weights[1]

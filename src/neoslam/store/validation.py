@@ -10,24 +10,12 @@ import sqlite3
 from pathlib import Path
 
 from neoslam import __version__
-from neoslam.config import NeoSLAMConfig
+from neoslam.config import MAP_SECTIONS, NeoSLAMConfig
 from neoslam.errors import InputError
 from neoslam.store.schema import APPLICATION_ID, FORMAT_TAG, FORMAT_VERSION, TABLES, config_difference
 
 __all__ = ["MAP_SECTIONS", "read_header", "validate", "locked"]
 
-
-# The config sections a map depends on: a session extends a map only with the settings it was made with.
-MAP_SECTIONS = (
-    "grid_cells",
-    "head_direction",
-    "object_vector",
-    "hebbian",
-    "keyframes",
-    "matching",
-    "experience_map",
-    "object_map",
-)
 
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 _HEADER_SIZE = 100

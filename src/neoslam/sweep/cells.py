@@ -15,27 +15,14 @@ from typing import Any
 from pydantic import ValidationError
 
 import neoslam
-from neoslam.config import NOISE_PROFILES, NeoSLAMConfig, config_values, merge_settings
+from neoslam.config import MAP_SECTIONS, NOISE_PROFILES, NeoSLAMConfig, config_values, merge_settings
 from neoslam.errors import NeoSLAMError
 from neoslam.sweep.spec import AXES, Spec, _where
 
 __all__ = ["Source", "Cell", "Plan", "expand", "code_version", "content_hash"]
 
 # Config sections that only the run reads: a simulation is shared by cells that differ in these alone.
-RUN_ONLY_SECTIONS = frozenset(
-    {
-        "perception",
-        "grid_cells",
-        "head_direction",
-        "object_vector",
-        "hebbian",
-        "keyframes",
-        "matching",
-        "experience_map",
-        "object_map",
-        "evaluation",
-    }
-)
+RUN_ONLY_SECTIONS = frozenset({"perception", *MAP_SECTIONS, "evaluation"})
 ID_LENGTH = 16
 
 
