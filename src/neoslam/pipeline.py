@@ -117,7 +117,7 @@ class NeoSLAM:
         closures: list[LoopClosure] = []
         revisit = None
         if keyframe is not None:  # 3.2 matching; a stored keyframe seen again is not stored twice (lifelong)
-            closures = self._relocalise(frame.index, keyframe, odometry) + self._find_loops(keyframe)
+            closures = self._find_loops(frame.index, keyframe, odometry)
             cells = self._cell_state()  # relocalising in a stored map moves the cells to its frame
             revisit = self.experience_map.recognise(keyframe.id, closures, cells, odometry)
         self.experience_map.step(frame.index, odometry, velocities, cells, travelled_m, keyframe_id, revisit)  # 3.6
@@ -134,11 +134,13 @@ class NeoSLAM:
         self._record(frame, pose)
         return pose
 
-    def _find_loops(self, keyframe: Keyframe) -> list[LoopClosure]:
-        return self.loop_detector.query(keyframe, self.keyframes.odometer_m)
-
-    def _relocalise(self, frame_index: int, keyframe: Keyframe, odometry: np.ndarray) -> list[LoopClosure]:
-        return self.stored_map.relocalise(self, frame_index, keyframe, odometry)
+    def _find_loops(self, frame_index: int, keyframe: Keyframe, odometry: np.ndarray) -> list[LoopClosure]:
+        """The keyframe's closures: with a stored map's parts not joined yet (searched whole; the first joins this
+        session to the map), then within the map this session is in (a query keyframe closes one loop)."""
+        relocalised = self.stored_map.relocalise(self, frame_index, keyframe, odometry)
+        queries = {closure.query_keyframe for closure in relocalised}
+        found = self.loop_detector.query(keyframe, self.keyframes.odometer_m)
+        return relocalised + [closure for closure in found if closure.query_keyframe not in queries]
 
     @property
     def frames_processed(self) -> int:
