@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
 from scipy.spatial.transform import Rotation
 
 from neoslam.config import ExperienceMapConfig
@@ -265,6 +266,66 @@ def test_a_closure_of_an_unknown_keyframe_is_neither_accepted_nor_rejected() -> 
     assert not experience_map.close_loop(closure(1, 7, np.eye(4)), cells())
     assert experience_map.accepted_closures == [] and experience_map.rejected_closures == []
     assert len(experience_map.graph.links) == 1
+
+
+def long_drive_map(gate: str, metres: float, **update) -> ExperienceMap:
+    """Keyframe 0 at cells (0, 0, 0), then `metres` of travel to keyframe 1, whose cells are 12 bins from it: the
+    odometry drifted on the way (5 cells beyond the paper's 7)."""
+    experience_map = new_map(closure_gate=gate, **update)
+    experience_map.step(0, np.eye(4), VELOCITIES, cells((0, 0, 0)), 0.0, 0)
+    experience_map.step(1, pose(0.0, (metres, 0, 0)), VELOCITIES, cells((12, 0, 0)), metres, 1)
+    return experience_map
+
+
+@pytest.mark.parametrize(
+    ("gate", "metres", "accepted"),
+    [
+        ("grid-cells", 1000.0, False),  # the paper's check: 12 cells > 7
+        ("drift", 1000.0, True),  # 12 <= 7 + 2 x 10
+        ("drift", 200.0, False),  # 12 > 7 + 2 x 2: too far for 200 m of drift
+        ("drift", 250.0, True),  # at the edge: 7 + 2 x 2.5
+        ("none", 0.0, True),
+    ],
+)
+def test_the_drift_gate_admits_the_drift_of_the_metres_since_the_stored_experience(
+    gate: str, metres: float, accepted: bool
+) -> None:
+    experience_map = long_drive_map(gate, metres)
+    assert experience_map.close_loop(closure(1, 0, np.eye(4)), cells((12, 0, 0))) is accepted
+    assert len(experience_map.rejected_closures) == (not accepted)
+
+
+def test_the_drift_gate_is_the_papers_check_soon_after_a_closure() -> None:
+    """After 1 km without a closure the gate admits 27 cells; an accepted closure re-anchors the cells, and 50 m
+    later a closure whose cells are 10 bins off (implausible after 50 m of drift) is rejected, although the stored
+    experience was made 1050 m before."""
+    experience_map = long_drive_map("drift", 1000.0)
+    assert experience_map.close_loop(closure(1, 0, np.eye(4)), cells((12, 0, 0)))
+    experience_map.step(2, pose(0.0, (1050, 0, 0)), VELOCITIES, cells((10, 0, 0)), 50.0, 2)
+
+    implausible = closure(2, 0, np.eye(4))
+    assert not experience_map.close_loop(implausible, cells((10, 0, 0)))  # 10 > 7 + 2 x 0.5
+    assert experience_map.rejected_closures == [implausible]
+    assert experience_map.close_loop(closure(2, 0, np.eye(4)), cells((8, 0, 0)))  # 8 <= 8
+
+
+def test_the_drift_gate_also_decides_which_closures_are_revisits() -> None:
+    """recognise (lifelong mapping) asks the same gate as close_loop."""
+    relative = pose(0.0, (0.5, 0.0, 0.0))
+    for gate, revisit in (("grid-cells", False), ("drift", True)):
+        experience_map = long_drive_map(gate, 1000.0, reentry_distance=1000.0)
+        experience_map.step(2, pose(0.0, (1000.5, 0, 0)), VELOCITIES, cells((12, 0, 0)), 0.5, None)
+        found = experience_map.recognise(2, [closure(2, 0, relative)], cells((12, 0, 0)), pose(0.0, (1000.5, 0, 0)))
+        assert (found is not None) is revisit
+
+
+@pytest.mark.parametrize(
+    "update",
+    [{"closure_gate": "mahalanobis"}, {"gc_drift_cells_per_100m": -1.0}, {"gc_drift_cells_per_100m": float("inf")}],
+)
+def test_the_closure_gate_settings_are_checked(update: dict) -> None:
+    with pytest.raises(ValidationError):
+        ExperienceMapConfig(**update)
 
 
 def test_a_rejected_closure_leaves_the_map(biased_square) -> None:

@@ -5,8 +5,12 @@ An experience exp = [P_gc, P_hdc, Xr, KF] (eq. 16) is made for every new keyfram
 and when the decoded cells have moved more than S_max from the current experience's (eq. 17: stretches without
 objects still get experiences). Each new experience is linked to the previous one by the odometric displacement.
 A loop closure is accepted only when the recognised experience's grid-cell state is within
-`gc_distance_threshold` cells of the current one (the paper's second guard); it then links the two experiences
-with the metric transform of the object fit and triggers the correction.
+`gc_distance_threshold` cells of the current one (the paper's second guard, `closure_gate: grid-cells`); it then
+links the two experiences with the metric transform of the object fit and triggers the correction. The cells
+integrate the odometry, so they drift with it: `closure_gate: drift` (beyond the paper) widens the allowed distance
+by `gc_drift_cells_per_100m` for every 100 m travelled since the robot last knew where it was (since the stored
+experience was made, or since the last accepted closure, whichever is fewer), as the loop detector's retrieval
+radius widens with the distance travelled.
 
 Lifelong mapping (`reuse_places`, RatSLAM's and NeuroSLAM's rule, beyond the paper): a street driven again must
 not add a copy of itself. A new keyframe that a closure recognises as a stored one (cells within the guard, heading
@@ -104,6 +108,7 @@ class ExperienceMap:
         self._travelled_since = 0.0
         self._odometer = 0.0
         self._localised_at = -np.inf  # odometer reading of the last recognised place
+        self._made_at: list[float] = []  # odometer reading when each experience was made (closure gate: drift)
         self.rejected_closures: list[LoopClosure] = []
         self.accepted_closures: list[LoopClosure] = []
 
@@ -185,6 +190,7 @@ class ExperienceMap:
             self.graph.add_node(odometry_pose.copy())
         self.experiences.append(experience)
         self._odometry_poses.append(odometry_pose.copy())
+        self._made_at.append(self._odometer)
         if keyframe_id is not None:
             self._by_keyframe[keyframe_id] = experience.id
         self._begin_visit(experience.id, odometry_pose, cells, new=True)
@@ -261,12 +267,24 @@ class ExperienceMap:
         return bool(close and np.degrees(rotation_angle(error[:3, :3])) <= self.config.reentry_yaw_deg)
 
     def _cells_agree(self, cells: CellState, experience: int) -> bool:
-        """The paper's guard: the recognised experience's grid cells within gc_distance_threshold of the current
-        (for an experience of this session: another session's cells started elsewhere)."""
-        if self.experiences[experience].session != self.session:
+        """The closure gate (`closure_gate`): the recognised experience's grid cells within the allowed distance of
+        the current (for an experience of this session: another session's cells started elsewhere)."""
+        if self.config.closure_gate == "none" or self.experiences[experience].session != self.session:
             return True
         distance = np.linalg.norm(_circular(cells.grid, self.experiences[experience].grid_cell, self.grid_dims))
-        return bool(distance <= self.config.gc_distance_threshold)
+        return bool(distance <= self._allowed_cell_distance(experience))
+
+    def _allowed_cell_distance(self, experience: int) -> float:
+        """The paper's guard, gc_distance_threshold cells; the drift gate adds gc_drift_cells_per_100m for every
+        100 m the cells have integrated odometry since they last agreed with the map: since the stored experience
+        was made (its cells are those of then) or since the last accepted closure (whose recall re-anchored the
+        cells), whichever is fewer. Right after a closure it is the paper's check; after a long loop it admits the
+        drift the odometry may have gathered on it."""
+        threshold = self.config.gc_distance_threshold
+        if self.config.closure_gate != "drift":
+            return threshold
+        travelled = self._odometer - max(self._made_at[experience], self._localised_at)
+        return threshold + self.config.gc_drift_cells_per_100m * travelled / 100.0
 
     def _nearest(self, pose: np.ndarray, keyframes_only: bool) -> int | None:
         """The experience nearest to a corrected pose within `reuse_radius`, heading within `reuse_max_turn_deg`."""
@@ -395,6 +413,7 @@ class ExperienceMap:
         for link in state.links:
             self._link(link)
         self._odometry_poses = [e.pose for e in self.experiences]
+        self._made_at = [-np.inf] * len(self.experiences)  # another session's: the gate does not compare its cells
         self._by_keyframe = dict(state.keyframe_experience)
 
     def correct(self) -> None:
