@@ -19,6 +19,7 @@ __all__ = ["SimulatedDetection", "InView", "DetectionSimulator"]
 
 FALSE_POSITIVE = -1  # object id of a detection with no object behind it
 MIN_DISPARITY = 0.5  # px: stereo matching gives up below this
+MIN_BOX_PX = 1.0  # a detector reports no box narrower or lower than a pixel
 SCORE_NEAR, SCORE_FAR, SCORE_SIGMA = 0.9, 0.55, 0.08  # detector confidence falls with range
 SCORE_RANGE = (0.3, 0.99)
 FALSE_POSITIVE_SCORE = (0.3, 0.6)
@@ -52,6 +53,14 @@ def _interpolate(table: tuple[tuple[float, float], ...], key: float) -> float:
     """Linear interpolation in a (key, value) table, held at the ends."""
     keys, values = zip(*table, strict=True)
     return float(np.interp(key, keys, values))
+
+
+def _ordered(box: np.ndarray) -> np.ndarray:
+    """x1 < x2 and y1 < y2, each side at least MIN_BOX_PX: corner noise larger than a small, far box would
+    otherwise turn it inside out (or to nothing once written to two decimals)."""
+    low, high = np.minimum(box[:2], box[2:]), np.maximum(box[:2], box[2:])
+    middle, half = (low + high) / 2, np.maximum(high - low, MIN_BOX_PX) / 2
+    return np.concatenate([middle - half, middle + half])
 
 
 def _yaw_matrix(yaw: float) -> np.ndarray:
@@ -175,7 +184,9 @@ class DetectionSimulator:
         disparity = disparity + rng.normal(0.0, self.noise.disparity_sigma)
         if disparity[0] < MIN_DISPARITY:
             return None
-        box = self.camera.box(self._corners_in_camera(index, centre, pose)) + rng.normal(0.0, self.noise.box_sigma, 4)
+        box = _ordered(
+            self.camera.box(self._corners_in_camera(index, centre, pose)) + rng.normal(0.0, self.noise.box_sigma, 4)
+        )
         return SimulatedDetection(
             label=self._label(str(self.world.labels[index]), rng),
             score=self._score(depth, rng),
