@@ -5,7 +5,7 @@ worker per core), and the per-cell overhead of Ray tasks (a local Ray instance w
                                        [--no-ray] [--json FILE]
 
 Default spec: the block route cut to 400 poses, noise vo and heavy, seeds 1-4 (8 cells). `--quick`: 200 poses,
-seeds 1-2 (4 cells). `--full`: the 36 drives of `benchmarks/specs/kitti_sim.yaml` (108 runs: three back ends on each
+seeds 1-2 (4 cells). `--full`: the 12 drives of `benchmarks/specs/kitti_sim.yaml` (72 runs: six settings on each
 drive's simulation), a long measurement (about an hour on two idle cores); `--sequences` and `--seeds` cut it down.
 Every run starts from an empty sweep
 folder (nothing resumed), and the serial, pool and Ray tables are checked to be the same bytes. The load average
@@ -27,7 +27,7 @@ from neoslam.sweep import LocalPool, RayCluster, expand, load_spec, parse_spec, 
 
 
 def _options(parser) -> None:
-    parser.add_argument("--full", action="store_true", help="the 36-drive kitti_sim spec (long)")
+    parser.add_argument("--full", action="store_true", help="the kitti_sim spec (long)")
     parser.add_argument("--workers", type=int, default=os.cpu_count(), help="pool workers (default: one per core)")
     parser.add_argument("--no-ray", action="store_true", help="skip the Ray measurement")
     parser.add_argument("--sequences", nargs="+", help="with --full: only these KITTI sequences")

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
 
+from cli_runner import invoke as _invoke
+from cli_runner import ok as _ok
 from neoslam import __version__
-from neoslam.cli import app
 from neoslam.config import NeoSLAMConfig, load_config
 
 FRAMES = 300
@@ -40,17 +40,6 @@ def _executable() -> str:
     found = str(beside) if beside.is_file() else shutil.which("neoslam")
     assert found, "the neoslam console script is not installed"
     return found
-
-
-def _invoke(*args: object, env: dict[str, str] | None = None):
-    return CliRunner().invoke(app, [str(a) for a in args], env=env)
-
-
-def _ok(*args: object, env: dict[str, str] | None = None):
-    result = _invoke(*args, env=env)
-    assert result.exit_code == 0, result.output
-    assert result.exception is None
-    return result
 
 
 def _evo_ape(reference: Path, estimate: Path) -> float:

@@ -14,9 +14,9 @@ import cv2
 import numpy as np
 import pytest
 import yaml
-from typer.testing import CliRunner
 
-from neoslam.cli import app
+from cli_runner import invoke as _invoke
+from cli_runner import one_line_error as _one_line_error
 
 SMALL_FRAMES = 40  # a cut of the block route: enough to run end to end in a few seconds
 BOM = b"\xef\xbb\xbf"
@@ -24,21 +24,6 @@ BOM = b"\xef\xbb\xbf"
 P0 = "707.0912 0 601.8873 0 0 707.0912 183.1104 0 0 0 1 0"
 P1 = "707.0912 0 601.8873 -379.8145 0 707.0912 183.1104 0 0 0 1 0"
 KITTI_FRAMES = 3
-
-
-def _invoke(*args: object, env: dict[str, str] | None = None):
-    return CliRunner().invoke(app, [str(a) for a in args], env=env)
-
-
-def _one_line_error(result, *parts: str) -> str:
-    assert "Traceback" not in result.output, result.output
-    assert result.exit_code == 2, (result.exit_code, result.output, result.exception)
-    assert isinstance(result.exception, SystemExit), result.exception
-    lines = result.stderr.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("neoslam: error: "), result.stderr
-    for part in parts:
-        assert part in lines[0], (part, lines[0])
-    return lines[0]
 
 
 def _ok(result) -> None:

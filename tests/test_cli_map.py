@@ -19,31 +19,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
 
-from neoslam.cli import app
+from cli_runner import invoke as _invoke
+from cli_runner import ok as _ok
+from cli_runner import one_line_error as _one_line_error
 from neoslam.config import NeoSLAMConfig
 from neoslam.store.map_file import MapFile
-
-
-def _invoke(*args: object):
-    return CliRunner().invoke(app, [str(a) for a in args])
-
-
-def _ok(*args: object):
-    result = _invoke(*args)
-    assert result.exit_code == 0, (result.output, result.exception)
-    return result
-
-
-def _one_line_error(result, *parts: str) -> str:
-    assert "Traceback" not in result.output, result.output
-    assert result.exit_code == 2, (result.exit_code, result.output, result.exception)
-    lines = result.stderr.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("neoslam: error: "), result.stderr
-    for part in parts:
-        assert part in lines[0], (part, lines[0])
-    return lines[0]
 
 
 def _digest(path: Path) -> str:

@@ -15,7 +15,9 @@ from neoslam.geometry import make_pose
 from neoslam.pipeline import NeoSLAM
 from neoslam.types import Keyframe, LoopClosure
 
-CONFIG = NeoSLAMConfig()
+# NeuroSLAM's order: every closure the detector accepts recalls its place (the default recalls only on accepted ones;
+# the tests of that order name it).
+CONFIG = NeoSLAMConfig.model_validate({"hebbian": {"recall_on": "detected"}})
 CELL_M = CONFIG.grid_cells.metres_per_cell
 STORED_CELL = np.array([10.0, 20.0, 18.0])  # the grid cells when the place was stored
 STORED_HEADING_CELL = 9.0  # 90 degrees, in the cells' frame

@@ -232,8 +232,11 @@ def _metrics(dataset: Dataset, result: RunResult, config: NeoSLAMConfig, wall_s:
     }
     metrics["hebbian_bytes"] = result.hebbian.nbytes
     metrics["objects"] = len(result.objects)
+    metrics["moving_objects"] = len(result.moving_objects)
+    metrics["moving_observations"] = result.moving_observations
     metrics["cells"] = cell_metrics(result.cell_states, result.odometry, result.object_vector_cells)
     metrics["timing"] = timing_metrics(result.frame_times_s, wall_s)
+    metrics["timing"]["backend_s"] = experience_map.backend_seconds  # in the pose-graph solvers, summed
     if isinstance(dataset, ImageDataset):
         metrics["perception"] = dataset.front_end.times.summary()
     return metrics
@@ -363,7 +366,7 @@ def run_dataset(
             trajectories["groundtruth"] = dataset.ground_truth
         write_trajectories(staging, trajectories)
         write_loop_closures(staging / "loop_closures.csv", result.loop_closures, result.closure_sessions())
-        write_objects(staging / "objects.csv", result.objects)
+        write_objects(staging / "objects.csv", result.objects, result.moving_objects)
         write_object_vector_cells(staging, result.object_vector_cells)
         write_experience_map(staging / "experience_map.json", result.experience_map)
         write_g2o(staging / "experience_map.g2o", result.experience_map)

@@ -27,6 +27,7 @@ from neoslam.geometry import invert_pose, planar_motion
 from neoslam.loop.detector import LoopClosureDetector
 from neoslam.loop.keyframes import KeyframeBuilder
 from neoslam.mapping.experience_map import CellState, ExperienceMap, Revisit
+from neoslam.mapping.moving_objects import MovingObjectDetector
 from neoslam.mapping.object_map import MapObject, ObjectMap
 from neoslam.sessions import StoredMap
 from neoslam.store.records import MapState, SessionRecord
@@ -60,6 +61,8 @@ class RunResult:
     keyframe_frames: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     session: SessionRecord = SessionRecord(1, "", 0, None)  # this run, in a map kept over sessions
     first_keyframe: int = 0  # keyframes with lower ids are a stored map's (earlier sessions')
+    moving_objects: list[MapObject] = field(default_factory=list)  # where each moving object was last seen
+    moving_observations: int = 0  # observations kept out of keyframes and the map as moving
 
     def closure_sessions(self) -> list[tuple[int, int]]:
         """Per loop closure, this session and the session of the keyframe it recognised."""
@@ -90,7 +93,11 @@ class NeoSLAM:
         self.keyframes = KeyframeBuilder(config.keyframes, first_id=stored.next_keyframe)
         self.loop_detector = LoopClosureDetector(config.keyframes, config.matching)
         self.object_map = ObjectMap(config.object_map, config.keyframes.footprints)
+        self.moving_objects = MovingObjectDetector(
+            config.moving_objects, config.object_map, config.keyframes.footprints
+        )
         self.experience_map = ExperienceMap(config.experience_map, self.grid_cells.dims, config.head_direction.cells)
+        self.experience_map.landmark_source = self.object_map  # its objects, landmarks with object_landmarks
         self.detected_closures: list[LoopClosure] = []  # accepted by the loop-closure detector
         self.loop_closures: list[LoopClosure] = []  # and by the experience map's grid-cell check
         self._previous_odometry: np.ndarray | None = None
@@ -110,7 +117,8 @@ class NeoSLAM:
         """Process one frame (the paper's steps in order); returns the current pose estimate T_world_robot."""
         travelled_m = self._integrate_path(frame)  # 3.3: head-direction and grid cells
         odometry = frame.odometry_pose
-        keyframe = self.keyframes.add(frame.index, odometry, frame.observations, travelled_m)  # 3.2
+        observations = self.moving_objects.static(frame, self.keyframes.window)  # beyond the paper: no movers
+        keyframe = self.keyframes.add(frame.index, odometry, observations, travelled_m)  # 3.2
         cells = self._cell_state()
         velocities = (frame.linear_velocity, frame.angular_velocity)
         keyframe_id = keyframe.id if keyframe is not None else None
@@ -130,7 +138,7 @@ class NeoSLAM:
         pose = self.experience_map.current_pose(odometry)
         anchor, anchor_from_robot = self.experience_map.anchor(odometry)
         self.object_map.refresh(self.experience_map.graph.poses)  # objects follow the corrected map
-        self.object_map.add(pose, frame.observations, anchor, anchor_from_robot, self.keyframes.odometer_m)
+        self.object_map.add(pose, observations, anchor, anchor_from_robot, self.keyframes.odometer_m)
         self._record(frame, pose)
         return pose
 
@@ -299,8 +307,9 @@ class NeoSLAM:
         recognised = min(own, default=None)
         empty = (np.empty(0, dtype=int), np.empty(0), np.empty(0))
         odometry = self._recorded_poses(slice(1, 13))
+        estimate = self.experience_map.trajectory(stamps, odometry)
         return RunResult(
-            estimate=self.experience_map.trajectory(stamps, odometry),
+            estimate=estimate,
             online_estimate=Trajectory(stamps, self._recorded_poses(slice(13, 25))),
             odometry=Trajectory(stamps, odometry),
             experience_map=self.experience_map,
@@ -316,6 +325,8 @@ class NeoSLAM:
             keyframe_frames=np.asarray(self.keyframes.frames, dtype=int),
             session=self.stored_map.record(self),
             first_keyframe=self.keyframes.first_id,
+            moving_objects=self.moving_objects.objects(estimate.poses),
+            moving_observations=self.moving_objects.flagged,
         )
 
 

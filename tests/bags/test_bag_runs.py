@@ -10,24 +10,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
 
-from neoslam.cli import app
+from cli_runner import invoke as _invoke
+from cli_runner import ok as _ok
 from neoslam.io.trajectory_files import read_trajectory, write_tum
 
 FRAMES = 30  # the first keyframes of the street come at frames 22 and 27
 EPOCH_S = 1_317_384_000  # tests/bags/conftest.py: the bags' stamps are KITTI's times from this second on
 SAME_BYTES = ("objects.csv", "loop_closures.csv", "experience_map.g2o", "trajectory_kitti.txt", "odometry_kitti.txt")
-
-
-def _invoke(*args: object, env: dict[str, str] | None = None):
-    return CliRunner().invoke(app, [str(a) for a in args], env=env)
-
-
-def _ok(*args: object, env: dict[str, str] | None = None):
-    result = _invoke(*args, env=env)
-    assert result.exit_code == 0, result.output
-    return result
 
 
 def _model_env(shared_data: Path) -> dict[str, str]:

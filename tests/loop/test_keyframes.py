@@ -124,7 +124,8 @@ def test_a_car_seen_straight_ahead_moves_half_its_length_along_the_ray() -> None
     pose = _at(100.0, 50.0, yaw=np.pi / 2)
     surface = np.array([10.0, 0.0, -0.9])
     window.add(pose, (_seen(surface, "car"),), 0.0)
-    centre = surface * (1 + (length / 2) / np.linalg.norm(surface))
+    # Along the ray in the ground plane: the height is kept (the visible surface is at the car's mid-height).
+    centre = surface + np.array([length / 2, 0.0, 0.0])
     np.testing.assert_allclose(window.objects[0].position, transform_points(pose, centre[None])[0], atol=1e-9)
     np.testing.assert_allclose(np.linalg.norm(centre - surface), 2.15)
 

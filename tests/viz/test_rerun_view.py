@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
 
-from neoslam.cli import app
+from cli_runner import invoke as _invoke
+from cli_runner import ok as _ok
 
 BLOCK_FRAMES = 600  # the simulated block route to its first revisit: a few loop closures
 PER_FRAME = (
@@ -28,16 +28,6 @@ PER_FRAME = (
     "metrics/observations",
 )
 MAP_LAYERS = ("world/trajectory/odometry", "world/trajectory/corrected", "world/objects", "world/keyframes")
-
-
-def _invoke(*args: object, env: dict[str, str] | None = None):
-    return CliRunner().invoke(app, [str(a) for a in args], env=env)
-
-
-def _ok(*args: object, env: dict[str, str] | None = None):
-    result = _invoke(*args, env=env)
-    assert result.exit_code == 0, result.output
-    return result
 
 
 def _simulate(root: Path, frames: int) -> Path:

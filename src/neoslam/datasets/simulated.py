@@ -100,6 +100,7 @@ class SimulatedDataset:
     angular_velocity: np.ndarray
     observations: tuple[tuple[ObjectObservation, ...], ...]
     ground_truth: Trajectory | None  # evaluation only
+    rows: tuple[tuple[int, ...], ...] = ()  # per frame, the detections.csv row of each observation
 
     def __len__(self) -> int:
         return len(self.timestamps)
@@ -107,6 +108,11 @@ class SimulatedDataset:
     def odometry(self) -> Trajectory:
         poses = integrate_body_velocities(self.linear_velocity, self.angular_velocity, self.timestamps)
         return Trajectory(self.timestamps, poses)
+
+    def detection_rows(self) -> list[np.ndarray]:
+        """Per frame, the detections.csv row of each of its observations, in order: what ties an observation to
+        truth/detections.csv, for evaluation only (the SLAM path reads frames())."""
+        return [np.asarray(rows, dtype=int) for rows in self.rows]
 
     def frames(self):
         """Frames in order, with the odometry integrated from the start pose (identity)."""
@@ -172,13 +178,17 @@ def _read_frames(path: Path, limits: MotionLimitsConfig) -> tuple[np.ndarray, np
     return stamps, linear, angular
 
 
-def _read_detections(folder: Path, frames: int) -> tuple[tuple[ObjectObservation, ...], ...]:
+def _read_detections(
+    folder: Path, frames: int
+) -> tuple[tuple[tuple[ObjectObservation, ...], ...], tuple[tuple[int, ...], ...]]:
+    """Per frame, its observations and the detections.csv row of each."""
     path = folder / "detections.csv"
     rows = read_table(path, DETECTION_COLUMNS)
     numeric = [c for c in DETECTION_COLUMNS if c != "label"]
     values = {name: numeric_column(path, rows, DETECTION_COLUMNS, name) for name in numeric}
     patches = _read_patches(folder / "patches.npy", len(rows))
     per_frame: list[list[ObjectObservation]] = [[] for _ in range(frames)]
+    rows_of: list[list[int]] = [[] for _ in range(frames)]
     for k, row in enumerate(rows):
         frame = values["frame"][k]
         if frame != int(frame) or not 0 <= frame < frames:
@@ -197,7 +207,8 @@ def _read_detections(folder: Path, frames: int) -> tuple[tuple[ObjectObservation
         per_frame[int(frame)].append(
             ObjectObservation(row[1], float(values["score"][k]), box[:4], box[4:], centre, patches[k])
         )
-    return tuple(tuple(observations) for observations in per_frame)
+        rows_of[int(frame)].append(k)
+    return tuple(tuple(observations) for observations in per_frame), tuple(tuple(rows) for rows in rows_of)
 
 
 def _npy_header(path: Path) -> tuple[tuple[int, ...], np.dtype, int]:
@@ -248,11 +259,11 @@ def read_dataset(folder: Path, limits: MotionLimitsConfig | None = None) -> Simu
     stamps, linear, angular = _read_frames(folder / "frames.csv", limits or MotionLimitsConfig())
     if meta.get("frames") != len(stamps):
         raise InputError(folder / "frames.csv", f"{len(stamps)} frames, dataset.yaml says {meta.get('frames')}")
-    observations = _read_detections(folder, len(stamps))
+    observations, rows = _read_detections(folder, len(stamps))
     truth_file = folder / "truth" / "poses_tum.txt"
     truth = read_tum(truth_file) if truth_file.is_file() else None
     if truth is not None and len(truth) != len(stamps):
         raise InputError(truth_file, f"{len(truth)} poses for {len(stamps)} frames")
     return SimulatedDataset(
-        folder, str(meta.get("name", folder.name)), meta["camera"], stamps, linear, angular, observations, truth
+        folder, str(meta.get("name", folder.name)), meta["camera"], stamps, linear, angular, observations, truth, rows
     )

@@ -36,7 +36,7 @@ LOOP_COLUMNS = (
     "tx", "ty", "tz", "qx", "qy", "qz", "qw", "session", "match_session",
 )  # fmt: skip
 LOOP_COLUMNS_WITHOUT_SESSIONS = LOOP_COLUMNS[:-2]  # as written before maps were kept over sessions
-OBJECT_COLUMNS = ("id", "label", "x", "y", "z", "observations")
+OBJECT_COLUMNS = ("id", "label", "x", "y", "z", "observations", "moving")
 
 
 def write_trajectories(folder: Path, trajectories: dict[str, Trajectory]) -> None:
@@ -60,8 +60,14 @@ def write_loop_closures(path: Path, closures: list[LoopClosure], sessions: list[
     write_table(path, LOOP_COLUMNS, rows)
 
 
-def write_objects(path: Path, objects: list[MapObject]) -> None:
-    rows = [[o.id, o.label, *(f"{v:.4f}" for v in o.position), o.observations] for o in objects]
+def write_objects(path: Path, objects: list[MapObject], moving: list[MapObject] | None = None) -> None:
+    """The map's objects (moving 0), then the moving objects where they were last seen (moving 1; their ids are
+    their own: an object is named by id and moving together)."""
+    rows = [
+        [o.id, o.label, *(f"{v:.4f}" for v in o.position), o.observations, flag]
+        for flag, group in ((0, objects), (1, moving or []))
+        for o in group
+    ]
     write_table(path, OBJECT_COLUMNS, rows)
 
 

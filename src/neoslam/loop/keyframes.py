@@ -21,24 +21,42 @@ from neoslam.geometry import transform_points
 from neoslam.io.frames import camera_points_to_robot
 from neoslam.types import Keyframe, ObjectObservation
 
-__all__ = ["LocalObjectWindow", "KeyframeBuilder", "object_centres"]
+__all__ = ["LocalObjectWindow", "KeyframeBuilder", "footprint_radii", "object_centres"]
+
+# The latest views the window can give back (retract): a moving object is found within a track's views (a few
+# dozen), and this bounds the record when the robot stands and the window forgets nothing.
+RETRACTABLE_VIEWS = 2048
+
+
+def footprint_radii(
+    labels: list[str] | tuple[str, ...], bearing: np.ndarray, footprints: dict[str, tuple[float, float]]
+) -> np.ndarray:
+    """Radius of each class's footprint ellipse (length, width) in the direction of a ray `bearing` radians off the
+    heading, taking objects to lie along the road (along the heading); 0 for a class without a footprint."""
+    footprint = np.array([footprints.get(label, (0.0, 0.0)) for label in labels], dtype=float).reshape(-1, 2) / 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        radius = 1.0 / np.sqrt((np.cos(bearing) / footprint[:, 0]) ** 2 + (np.sin(bearing) / footprint[:, 1]) ** 2)
+    return np.nan_to_num(radius)  # a class without a footprint is taken as a point
 
 
 def object_centres(
     observations: tuple[ObjectObservation, ...], footprints: dict[str, tuple[float, float]]
 ) -> np.ndarray:
     """(n, 3) stereo centres (camera frame) moved from the visible surface to the object's middle, along the viewing
-    ray: otherwise a place driven the other way sees every object from its other side, a metre or two away, and a
-    far view (the object's end) and a near one (its side) disagree. The depth to add is the radius of the class's
-    footprint ellipse (length, width) in the direction of the ray, taking objects to lie along the road, that is
-    along the robot's heading."""
+    ray in the ground plane: otherwise a place driven the other way sees every object from its other side, a metre or
+    two away, and a far view (the object's end) and a near one (its side) disagree. The depth to add is the radius of
+    the class's footprint ellipse (length, width) in the direction of the ray, taking objects to lie along the road,
+    that is along the robot's heading. The height is kept: the visible surface's centre is at the object's mid-height
+    already, and a shift along the 3-D ray would move it by radius * height / distance, more for near views."""
     surface = np.array([o.center_camera for o in observations], dtype=float).reshape(-1, 3)
-    footprint = np.array([footprints.get(o.label, (0.0, 0.0)) for o in observations], dtype=float).reshape(-1, 2) / 2
     bearing = np.arctan2(surface[:, 0], surface[:, 2])  # angle between the ray and the heading
+    radius = footprint_radii([o.label for o in observations], bearing, footprints)
+    ground = np.hypot(surface[:, 0], surface[:, 2])  # camera frame: x right, y down, z forward
     with np.errstate(divide="ignore", invalid="ignore"):
-        radius = 1.0 / np.sqrt((np.cos(bearing) / footprint[:, 0]) ** 2 + (np.sin(bearing) / footprint[:, 1]) ** 2)
-    radius = np.nan_to_num(radius)  # a class without a footprint is taken as a point
-    return surface * (1.0 + radius / np.linalg.norm(surface, axis=1))[:, None]
+        scale = np.where(ground > 0, radius / ground, 0.0)
+    shifted = surface.copy()
+    shifted[:, [0, 2]] *= 1.0 + scale[:, None]
+    return shifted
 
 
 @dataclass
@@ -61,9 +79,15 @@ class LocalObjectWindow:
 
     config: KeyframeConfig
     objects: list[_WindowObject] = field(default_factory=list)
+    # id(view) -> (view, the object it joined, its weighted point, its weight), oldest first: what retract undoes.
+    _taken: dict[int, tuple[ObjectObservation, _WindowObject, np.ndarray, float]] = field(default_factory=dict)
 
-    def add(self, pose: np.ndarray, observations: tuple[ObjectObservation, ...], odometer_m: float) -> None:
-        """Fuse one frame's observations, seen from robot pose T_world_robot, and forget stale objects."""
+    def add(
+        self, pose: np.ndarray, observations: tuple[ObjectObservation, ...], odometer_m: float
+    ) -> list[_WindowObject]:
+        """Fuse one frame's observations, seen from robot pose T_world_robot, and forget stale objects; returns the
+        window object each observation joined."""
+        joined = []
         if observations:
             measured_depth = np.array([o.center_camera[2] for o in observations])
             world = transform_points(pose, camera_points_to_robot(self._object_centres(observations)))
@@ -73,14 +97,42 @@ class LocalObjectWindow:
             measured_sigma = np.array([o.depth_sigma or 0.0 for o in observations])
             weights = 1.0 / np.maximum(sigma, measured_sigma) ** 2
             for observation, point, weight in zip(observations, world, weights, strict=True):
-                self._fuse(observation, point, float(weight), odometer_m)
+                joined.append(self._fuse(observation, point, float(weight), odometer_m))
+                self._taken[id(observation)] = (observation, joined[-1], weight * point, float(weight))
         horizon = odometer_m - self.config.window_length
-        self.objects = [o for o in self.objects if o.last_seen_m >= horizon]
+        kept = [o for o in self.objects if o.last_seen_m >= horizon]
+        if len(kept) < len(self.objects):
+            live = {id(o) for o in kept}
+            self._taken = {k: v for k, v in self._taken.items() if id(v[1]) in live}
+        self.objects = kept
+        for oldest in list(self._taken)[: max(len(self._taken) - RETRACTABLE_VIEWS, 0)]:
+            del self._taken[oldest]
+        return joined
+
+    def retract(self, observations: tuple[ObjectObservation, ...]) -> int:
+        """Take views fused earlier back out of their objects (views of an object since found moving); an object
+        left without views leaves the window. Views no longer held are skipped. Returns the views taken out."""
+        taken = 0
+        for observation in observations:
+            entry = self._taken.pop(id(observation), None)
+            if entry is None or entry[0] is not observation:
+                continue
+            _, joined, weighted_point, weight = entry
+            joined.weighted_sum -= weighted_point
+            joined.weight -= weight
+            joined.patch_sum -= observation.patch
+            joined.observations -= 1
+            if joined.observations == 0:
+                self.objects = [o for o in self.objects if o is not joined]
+            taken += 1
+        return taken
 
     def _object_centres(self, observations: tuple[ObjectObservation, ...]) -> np.ndarray:
         return object_centres(observations, self.config.footprints)
 
-    def _fuse(self, observation: ObjectObservation, point: np.ndarray, weight: float, odometer_m: float) -> None:
+    def _fuse(
+        self, observation: ObjectObservation, point: np.ndarray, weight: float, odometer_m: float
+    ) -> _WindowObject:
         same_label = [o for o in self.objects if o.label == observation.label]
         if same_label:
             distances = [np.linalg.norm(o.position - point) for o in same_label]
@@ -91,10 +143,12 @@ class LocalObjectWindow:
                 nearest.patch_sum += observation.patch
                 nearest.observations += 1
                 nearest.last_seen_m = odometer_m
-                return
-        self.objects.append(
-            _WindowObject(observation.label, weight * point, weight, observation.patch.astype(float), 1, odometer_m)
+                return nearest
+        joined = _WindowObject(
+            observation.label, weight * point, weight, observation.patch.astype(float), 1, odometer_m
         )
+        self.objects.append(joined)
+        return joined
 
     def confirmed(self) -> list[_WindowObject]:
         """Objects seen often enough to trust (single sightings are mostly false positives)."""

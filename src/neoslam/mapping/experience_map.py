@@ -34,6 +34,7 @@ frame. The grid-cell check compares experiences of one session only: two session
 
 from __future__ import annotations
 
+import time
 from array import array
 from dataclasses import dataclass, replace
 
@@ -42,6 +43,7 @@ import numpy as np
 from neoslam.config import ExperienceMapConfig
 from neoslam.geometry import invert_pose, rotation_angle, yaw_of
 from neoslam.mapping.graph import Link, MapGraph
+from neoslam.mapping.landmarks import LOOP_ITERATIONS, LandmarkSolver, ObservationSource
 from neoslam.mapping.parts import MapParts
 from neoslam.mapping.pose_graph import optimise_pose_graph
 from neoslam.mapping.relaxation import LinkMeasurement, link_measurement, relax
@@ -111,6 +113,11 @@ class ExperienceMap:
         self._made_at: list[float] = []  # odometer reading when each experience was made (closure gate: drift)
         self.rejected_closures: list[LoopClosure] = []
         self.accepted_closures: list[LoopClosure] = []
+        self.landmark_source: ObservationSource | None = None  # the object map, for object_landmarks
+        self._landmarks: LandmarkSolver | None = None  # built on first use, rebuilt after a restore or a join
+        self._landmark_part = -1  # the part the landmark solver holds
+        self._solved_visit = 0  # the visit that was current at the last landmark solve
+        self.backend_seconds = 0.0  # wall time in the pose-graph solvers (timing only: never read by the map)
 
     @property
     def current(self) -> int:
@@ -209,6 +216,14 @@ class ExperienceMap:
         self._unoptimised = 0
         if self.config.backend != "pose-graph":
             return
+        start = time.perf_counter()
+        if self.uses_landmarks:
+            self._solve_landmarks(LOOP_ITERATIONS)
+        else:
+            self._optimise_pose_graph()
+        self.backend_seconds += time.perf_counter() - start
+
+    def _optimise_pose_graph(self) -> None:
         part = self.parts.members(self.parts.part_of(self.current))
         if part.all():
             optimise_pose_graph(self.graph, self.config)
@@ -226,9 +241,48 @@ class ExperienceMap:
         self.graph.poses[nodes] = piece.poses
 
     def finish(self) -> None:
-        """Optimise the links still waiting (see BATCHED_LINKS): the map as the last frame leaves it."""
-        if self._unoptimised:
+        """Optimise the links still waiting (see BATCHED_LINKS): the map as the last frame leaves it. With object
+        landmarks, also the observations of the experience the robot is in."""
+        if self.uses_landmarks and self._current >= 0:
+            start = time.perf_counter()
+            self._solve_landmarks(LOOP_ITERATIONS if self._unoptimised else 0, final=True)
+            self.backend_seconds += time.perf_counter() - start
+            self._unoptimised = 0
+        elif self._unoptimised:
             self._optimise()
+
+    @property
+    def uses_landmarks(self) -> bool:
+        """Whether the pose graph holds the object map's objects as landmarks (experience_map.object_landmarks)."""
+        return self.config.object_landmarks and self.config.backend == "pose-graph" and self.landmark_source is not None
+
+    @property
+    def landmark_solver(self) -> LandmarkSolver | None:
+        """The iSAM2 solver of the robot's part with the object landmarks (None: not used, or not yet built)."""
+        return self._landmarks
+
+    def _landmarks_due(self) -> bool:
+        """Whether the landmark solver has something to add: no solver yet, or an experience the robot left."""
+        if not self.uses_landmarks or self._current < 0:
+            return False
+        return self._landmarks is None or self.visits - 1 > self._solved_visit
+
+    def _solve_landmarks(self, iterations: int = 0, final: bool = False) -> None:
+        """Bring the landmark solver up to date: the experiences and links made since its last update and the
+        observation sums of the experiences left since (with `final`, of the current one too); a new solver for
+        the robot's part the first time, after a restore or a join, or when the robot's part is another."""
+        assert self.landmark_source is not None
+        part = self.parts.part_of(self.current)
+        if self._landmarks is None or self._landmark_part != part:
+            self._landmarks, self._landmark_part = LandmarkSolver(self.config), part
+            left = np.arange(len(self.experiences))
+        else:
+            visits = np.frombuffer(self._visit_experience, dtype=self._visit_experience.typecode)
+            left = np.unique(visits[self._solved_visit : self.visits - 1])
+        current = -1 if final else self.current
+        self._landmarks.odometer, self._landmarks.localised = self._odometer, self.localised
+        self._landmarks.update(self.graph, self.parts.members(part), self.landmark_source, left, current, iterations)
+        self._solved_visit = self.visits - 1
 
     def recognise(
         self, keyframe_id: int, closures: list[LoopClosure], cells: CellState, odometry_pose: np.ndarray
@@ -398,6 +452,7 @@ class ExperienceMap:
             moved, moving = invert_pose(moved), there
         members = self.parts.members(moving)
         self.graph.poses[members] = moved @ self.graph.poses[members]
+        self._landmarks = None  # rebuilt from the moved graph at the next solve
         self._measurements = [link_measurement(self.graph, link) for link in self.graph.links]
         return moving == here
 
@@ -405,6 +460,7 @@ class ExperienceMap:
         """Start from a stored map: its experiences, corrected poses and links; this run's experiences belong to
         `session` and start a part of the map of their own."""
         self.session = session
+        self._landmarks = None  # rebuilt from the restored graph at the next solve
         self.experiences = list(state.experiences)
         self.graph = MapGraph(np.array(state.experience_poses, dtype=float).reshape(-1, 4, 4), [])
         self.parts = MapParts()
@@ -417,7 +473,12 @@ class ExperienceMap:
         self._by_keyframe = dict(state.keyframe_experience)
 
     def correct(self) -> None:
-        """Per frame: the paper's relaxation passes, once the map has a loop to relax."""
+        """Per frame: the paper's relaxation passes, once the map has a loop to relax; with object landmarks, an
+        iSAM2 update whenever the robot has left an experience (its observation sums are then complete)."""
+        if self._landmarks_due():
+            start = time.perf_counter()
+            self._solve_landmarks()
+            self.backend_seconds += time.perf_counter() - start
         if self.config.backend == "relaxation" and self.accepted_closures:
             measurements = self._measurements
             if len(self.parts.roots()) > 1:  # the robot's part only: a stored session not joined stays as stored

@@ -87,6 +87,8 @@ class ObjectMap:
         self._cell_of: dict[int, tuple[str, int, int]] = {}
         self._refreshed_positions: np.ndarray | None = None  # experience positions at the last refresh
         self._forgotten_at = -np.inf
+        # (merged away, kept) of every merge in order: a landmark back end (neoslam.mapping.landmarks) follows them
+        self.merges: list[tuple[int, int]] = []
         self._merged_at = 0.0
 
     def __len__(self) -> int:
@@ -322,6 +324,7 @@ class ObjectMap:
             self._last_seen[keep] = max(self._last_seen[keep], self._last_seen[gone])
             self._sums[gone], self._weights[gone], self._counts[gone] = 0.0, 0.0, 0
             root[gone] = keep
+            self.merges.append((int(gone), int(keep)))
             self._tentative.discard(gone)
             if self._counts[keep] >= self.config.min_observations:
                 self._tentative.discard(keep)

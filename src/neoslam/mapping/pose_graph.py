@@ -16,7 +16,7 @@ import numpy as np
 from neoslam.config import ExperienceMapConfig
 from neoslam.mapping.graph import Link, MapGraph
 
-__all__ = ["LoopResidual", "PoseGraphReport", "link_sigmas", "optimise_pose_graph"]
+__all__ = ["LoopResidual", "PoseGraphReport", "link_noise_model", "link_sigmas", "optimise_pose_graph"]
 
 # Roll and pitch are observable from gravity, so links hold them tightly whatever the distance travelled.
 ROLL_PITCH_SIGMA_RAD = 0.01
@@ -108,6 +108,11 @@ def link_sigmas(link: Link, config: ExperienceMapConfig) -> np.ndarray:
         sigmas[_YAW] = max(ODOMETRY_YAW_SIGMA_FLOOR_RAD, config.odometry_yaw_sigma_per_root_metre * root)
         sigmas[_TRANSLATION] = max(config.odometry_sigma_floor, config.odometry_sigma_per_root_metre * root)
     return sigmas
+
+
+def link_noise_model(link: Link, config: ExperienceMapConfig) -> gtsam.noiseModel.Base:
+    """The noise model of a link's between-factor: its sigmas (see link_sigmas), a robust kernel on a loop link."""
+    return _noise_model(link, link_sigmas(link, config), config)
 
 
 def _noise_model(link: Link, sigmas: np.ndarray, config: ExperienceMapConfig) -> gtsam.noiseModel.Base:

@@ -45,6 +45,7 @@ class InView:
 
     index: int
     centre: np.ndarray  # (3,) world frame
+    yaw: float  # heading of the object's length axis at that time, world frame
     depth: float  # m, of the centre in the camera frame
     column: float  # image column of the centre from the principal point, share of the half width
 
@@ -106,7 +107,7 @@ class DetectionSimulator:
     def in_view(self, pose: np.ndarray, time: float) -> list[InView]:
         """The objects the detector could report at a true robot pose, in object order (no random draws)."""
         cam = self.camera.config
-        positions = self.world.positions_at(time)
+        positions, yaws = self.world.positions_at(time), self.world.yaws_at(time)
         nearby = self._nearby(pose, positions)
         views = []
         for i in nearby:
@@ -117,27 +118,30 @@ class DetectionSimulator:
             pixel, _ = self.camera.project(centre_cam[None])
             if not self.camera.in_image(pixel)[0]:
                 continue
-            if self.noise.border_margin is not None and self._cut_off(i, positions[i], pose):
+            if self.noise.border_margin is not None and self._cut_off(i, positions[i], yaws[i], pose):
                 continue
-            views.append(InView(int(i), positions[i], float(depth), column_offset(float(pixel[0, 0]), cam)))
+            column = column_offset(float(pixel[0, 0]), cam)
+            views.append(InView(int(i), positions[i], float(yaws[i]), float(depth), column))
         if self.noise.occlusion_cover is not None:
-            views = self._unhidden(views, nearby, positions, pose)
+            views = self._unhidden(views, nearby, positions, yaws, pose)
         return views
 
-    def _corners_in_camera(self, index: int, centre: np.ndarray, pose: np.ndarray) -> np.ndarray:
-        corners = centre + (BOX_CORNERS * self.world.sizes[index]) @ _yaw_matrix(self.world.yaws[index]).T
+    def _corners_in_camera(self, index: int, centre: np.ndarray, yaw: float, pose: np.ndarray) -> np.ndarray:
+        corners = centre + (BOX_CORNERS * self.world.sizes[index]) @ _yaw_matrix(yaw).T
         return self._to_camera(pose, corners)
 
-    def _cut_off(self, index: int, centre: np.ndarray, pose: np.ndarray) -> bool:
-        corners = self._corners_in_camera(index, centre, pose)
+    def _cut_off(self, index: int, centre: np.ndarray, yaw: float, pose: np.ndarray) -> bool:
+        corners = self._corners_in_camera(index, centre, yaw, pose)
         behind = bool((corners[:, 2] <= MIN_CORNER_DEPTH).any())
         return cut_off(self.camera.extent(corners), behind, self.camera.config, self.noise.border_margin)
 
-    def _unhidden(self, views: list[InView], nearby: np.ndarray, positions: np.ndarray, pose) -> list[InView]:
+    def _unhidden(
+        self, views: list[InView], nearby: np.ndarray, positions: np.ndarray, yaws: np.ndarray, pose
+    ) -> list[InView]:
         """The views whose box is not mostly covered by the boxes of nearer objects (seen or not)."""
         boxes, depths, rows = [], [], {}
         for i in nearby:
-            corners = self._corners_in_camera(i, positions[i], pose)
+            corners = self._corners_in_camera(i, positions[i], yaws[i], pose)
             if not (corners[:, 2] > MIN_CORNER_DEPTH).any():
                 continue
             box = self.camera.box(corners)
@@ -166,11 +170,11 @@ class DetectionSimulator:
     def _to_camera(self, pose: np.ndarray, points: np.ndarray) -> np.ndarray:
         return robot_points_to_camera((points - pose[:3, 3]) @ pose[:3, :3])
 
-    def _measured_centre(self, index: int, centre: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    def _measured_centre(self, index: int, centre: np.ndarray, yaw: float, pose: np.ndarray) -> np.ndarray:
         """Stereo points lie on the visible surface: move the centre towards the camera along the ray."""
         ray = centre - pose[:3, 3]
         ray /= np.linalg.norm(ray)
-        in_object = _yaw_matrix(self.world.yaws[index]).T @ ray
+        in_object = _yaw_matrix(yaw).T @ ray
         radius = 1.0 / np.sqrt(((in_object / (self.world.sizes[index] / 2)) ** 2).sum())
         return centre - self.noise.surface_bias * radius * ray
 
@@ -178,14 +182,15 @@ class DetectionSimulator:
         index, centre, depth = view.index, view.centre, view.depth
         if rng.random() < self._miss_probability(depth, view.column):
             return None
-        surface = self._to_camera(pose, self._measured_centre(index, centre, pose)[None])
+        surface = self._to_camera(pose, self._measured_centre(index, centre, view.yaw, pose)[None])
         pixel, disparity = self.camera.project(surface)
         pixel = pixel + rng.normal(0.0, self.noise.pixel_sigma, 2)
         disparity = disparity + rng.normal(0.0, self.noise.disparity_sigma)
         if disparity[0] < MIN_DISPARITY:
             return None
         box = _ordered(
-            self.camera.box(self._corners_in_camera(index, centre, pose)) + rng.normal(0.0, self.noise.box_sigma, 4)
+            self.camera.box(self._corners_in_camera(index, centre, view.yaw, pose))
+            + rng.normal(0.0, self.noise.box_sigma, 4)
         )
         return SimulatedDetection(
             label=self._label(str(self.world.labels[index]), rng),

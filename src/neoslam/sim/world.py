@@ -1,5 +1,5 @@
 """A world of objects placed along a route the way a street holds them: parked cars on both sides, some trucks,
-bicycles and people at the kerb, optionally a share that moves along the road."""
+bicycles and people at the kerb, optionally a share that moves: traffic along the road (neoslam.sim.traffic)."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from scipy.spatial import cKDTree
 
 from neoslam.config import DetectionNoiseConfig, WorldConfig
 from neoslam.sim.routes import RepeatedLayout
+from neoslam.sim.traffic import Traffic, build_traffic
 from neoslam.types import Trajectory
 
 __all__ = ["CLASS_SIZES", "World", "build_world"]
@@ -34,7 +35,10 @@ PER_100M = 100.0  # m: row densities are objects per 100 m of route
 
 @dataclass(frozen=True)
 class World:
-    """Objects as arrays (one row each); positions are centres in the world frame at time 0."""
+    """Objects as arrays (one row each); positions, yaws and velocities are those at time 0 in the world frame.
+
+    The objects of `traffic` follow the route's centre line (see neoslam.sim.traffic); any other object with a
+    velocity (a world built by hand) moves in a straight line; the rest stand still."""
 
     labels: np.ndarray  # (n,) str
     positions: np.ndarray  # (n, 3)
@@ -42,17 +46,31 @@ class World:
     yaws: np.ndarray  # (n,) heading of the object's length axis
     velocities: np.ndarray  # (n, 3) m/s, zero for static objects
     textures: np.ndarray  # (n, s, s) float grey levels
+    traffic: Traffic | None = None  # the moving objects that follow the route
 
     def __len__(self) -> int:
         return len(self.labels)
 
     def positions_at(self, time: float) -> np.ndarray:
-        return self.positions + self.velocities * time
+        """(n, 3) centres at `time`, s (the drive's timestamps)."""
+        positions = self.positions + self.velocities * time
+        if self.traffic is not None:
+            positions[self.traffic.ids] = self.traffic.positions_at(time)
+        return positions
+
+    def yaws_at(self, time: float) -> np.ndarray:
+        """(n,) headings at `time`: traffic turns with the road and round at its ends; the rest keep theirs."""
+        if self.traffic is None:
+            return self.yaws
+        yaws = self.yaws.copy()
+        yaws[self.traffic.ids] = self.traffic.yaws_at(time)
+        return yaws
 
     def moved(self, transform: np.ndarray) -> World:
         """The same objects seen from another frame: x' = R x + t for the rigid (4, 4) `transform` [R | t].
 
-        Positions move as points (at time 0; a moving object moves on from there), velocities turn with R, and each
+        Positions move as points (at time 0; a moving object moves on from there, traffic along the moved centre
+        line, so that positions_at and yaws_at commute with the transform), velocities turn with R, and each
         yaw becomes the heading of the object's length axis turned by R, projected onto the new ground plane. Objects
         are upright boxes that have only a yaw, so a transform should be a yaw and a translation, with at most a small
         roll and pitch (a road's few degrees, as between two poses of a KITTI drive): positions take that tilt
@@ -69,11 +87,13 @@ class World:
             yaws=np.arctan2(axes[:, 1], axes[:, 0]).reshape(-1),
             velocities=self.velocities @ rotation.T,
             textures=self.textures.copy(),
+            traffic=None if self.traffic is None else self.traffic.moved(rotation, translation),
         )
 
 
 @dataclass(frozen=True)
 class _CentreLine:
+    arc: np.ndarray  # (n,) arc length from the first sample, m
     xy: np.ndarray  # (n, 2)
     ground: np.ndarray  # (n,) road height
     heading: np.ndarray  # (n,)
@@ -96,7 +116,7 @@ def _centre_line(trajectory: Trajectory, camera_height: float, revisit_radius: f
         [any(j < i - gap for j in tree.query_ball_point(dense[i, :2], revisit_radius)) for i in range(len(dense))],
         dtype=bool,
     )
-    return _CentreLine(dense[:, :2], dense[:, 2] - camera_height, heading, revisited)
+    return _CentreLine(samples, dense[:, :2], dense[:, 2] - camera_height, heading, revisited)
 
 
 def _class_textures(labels: list[str], size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
@@ -199,23 +219,38 @@ def build_world(
     """Objects along the true trajectory, standing on the road surface below the camera."""
     line = _centre_line(trajectory, camera_height, config.revisit_radius)
     if line is None:
-        return _world_of([], detection.patch_size, config, rng)
+        return _world_of([], detection.patch_size)
     placed, prototypes = _place(line, config, detection.patch_size, detection.texture_individuality, rng)
     for repeat in repeats:
         placed = _repeat_layout(placed, repeat, line, prototypes, detection.texture_individuality, rng)
-    return _world_of(placed, detection.patch_size, config, rng)
+    return _with_traffic(_world_of(placed, detection.patch_size), line, config, rng)
 
 
-def _world_of(placed: list[dict], patch_size: int, config: WorldConfig, rng: np.random.Generator) -> World:
+def _world_of(placed: list[dict], patch_size: int) -> World:
     labels = np.array([p["label"] for p in placed], dtype=str)
     xy = np.array([p["xy"] for p in placed]).reshape(-1, 2)
     sizes = np.array([CLASS_SIZES[label] for label in labels]).reshape(-1, 3)
     z = np.array([p["z"] for p in placed])
     yaws = np.array([p["yaw"] for p in placed])
-    velocities = np.zeros((len(placed), 3))
-    moving = rng.random(len(placed)) < config.moving_fraction
-    direction = rng.choice([-1.0, 1.0], size=len(placed))
-    velocities[moving, 0] = direction[moving] * config.moving_speed * np.cos(yaws[moving])
-    velocities[moving, 1] = direction[moving] * config.moving_speed * np.sin(yaws[moving])
     textures = np.array([p["texture"] for p in placed]).reshape(-1, patch_size, patch_size)
-    return World(labels, np.column_stack([xy, z]), sizes, yaws, velocities, textures)
+    return World(labels, np.column_stack([xy, z]), sizes, yaws, np.zeros((len(placed), 3)), textures)
+
+
+def _with_traffic(world: World, line: _CentreLine, config: WorldConfig, rng: np.random.Generator) -> World:
+    """The world with a share `moving_fraction` of its objects set moving, drawn after everything else is placed,
+    so that a street with traffic holds the same objects as the static one (and a static one is as before)."""
+    moving = np.flatnonzero(rng.random(len(world)) < config.moving_fraction)
+    backwards = rng.choice([True, False], size=len(world))[moving]  # both ways, as many against the route as along
+    if not len(moving):
+        return world
+    points = np.column_stack([line.xy, line.ground])
+    lift = world.sizes[moving, 2] / 2
+    labels, xy = world.labels[moving], world.positions[moving, :2]
+    traffic = build_traffic(moving, labels, xy, lift, backwards, line.arc, points, line.heading, config, rng)
+    positions, yaws, velocities = world.positions.copy(), world.yaws.copy(), world.velocities.copy()
+    positions[moving], yaws[moving], velocities[moving] = (
+        traffic.positions_at(0.0),
+        traffic.yaws_at(0.0),
+        traffic.velocities_at(0.0),
+    )
+    return World(world.labels, positions, world.sizes, yaws, velocities, world.textures, traffic)

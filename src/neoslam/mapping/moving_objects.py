@@ -1,0 +1,316 @@
+"""Moving objects (beyond the paper): a car driving past or a person walking is no landmark. Each observation is
+followed over a few frames in the odometry frame, which is accurate over a short stretch; an object whose position
+drifts across its observations beyond what their stereo noise allows is moving, and its observations join no
+keyframe and no map object.
+
+- An observation's centre (moved from the visible surface to the object's middle with the class footprints, as
+  keyframes do) goes to the odometry frame with the frame's odometry pose. Its uncertainty is the object map's
+  depth std along the viewing ray (stereo error grows with depth squared, or the front end's own when larger, never
+  below `position_sigma_floor`) and the floor across it.
+- Observations join tracks of their label, one each, nearest first, inside a gate around the track's prediction:
+  `gate_radius` across the viewing ray, `gate_sigmas` depth stds along it (at least the radius). A track predicts
+  with its fitted velocity shrunk by its significance (1 - (k/m)^2, m its Mahalanobis norm, k
+  `prediction_sigmas`): a static object's noisy velocity counts for nothing (else a far track wanders off and
+  takes other objects' views), a fast car's for almost all of it, so a car doing 1 m a frame stays on its track;
+  a track not yet judged (below `judge_after` views) predicts with none.
+- Per track, the last `track_length` observations are fitted with a constant velocity by weighted least squares
+  in the ground plane (each observation weighted by its inverse covariance, long along its ray). From
+  `judge_after` observations on, a track moves when its velocity is `significance_sigmas` stds from zero and at
+  least `min_speed`; once moving it stays so (a car waiting at a light is still traffic). The velocity's
+  covariance grows by the fit's reduced chi-square where the views scatter beyond their noise, and a view that
+  falls in two tracks' gates restarts its track's fit (far views of objects in a row can swap tracks, which then
+  seem to move).
+- A track not judged moving whose velocity is `hold_sigmas` stds from zero and fast enough is undecided: its
+  views are held out too (a far oncoming car needs a second of views to be judged at 30 m).
+- The views a track let through before it was found moving (or held) are taken back out of the keyframe window
+  (`LocalObjectWindow.retract`), with those of the track it broke off from: three early views of a car make a
+  window object that would otherwise stay in keyframes for the window's length. The object map keeps them.
+- Tracks end when unseen for `max_unseen` seconds; at most `max_tracks` are kept. Moving tracks are kept as a small
+  record (label, last view, frame) to be reported in the corrected map. Deterministic: no randomness, ties broken
+  by track and observation order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from neoslam.config import MovingObjectsConfig, ObjectMapConfig
+from neoslam.geometry import transform_points
+from neoslam.io.frames import camera_points_to_robot
+from neoslam.loop.keyframes import LocalObjectWindow, object_centres
+from neoslam.mapping.object_map import MapObject
+from neoslam.types import Frame, ObjectObservation
+
+__all__ = ["MovingObjectDetector", "observation_sigmas"]
+
+
+def observation_sigmas(observations: tuple[ObjectObservation, ...], config: ObjectMapConfig) -> np.ndarray:
+    """Std of each observed centre along its viewing ray, as the object map weighs it: stereo depth error grows with
+    depth squared (or the front end's own measure, when larger), never below `position_sigma_floor`."""
+    depth = np.array([o.center_camera[2] for o in observations], dtype=float)
+    measured = np.array([o.depth_sigma or 0.0 for o in observations], dtype=float)
+    stereo = config.depth_sigma_at_1m * depth**2
+    return np.maximum(np.maximum(stereo, measured), config.position_sigma_floor)
+
+
+def _information(rays: np.ndarray, along: np.ndarray, across: float) -> np.ndarray:
+    """(n, 2, 2) inverse covariances of ground-plane positions: `along` std on the unit ray, `across` off it."""
+    outer = rays[:, :, None] * rays[:, None, :]
+    return outer / along[:, None, None] ** 2 + (np.eye(2) - outer) / across**2
+
+
+class MovingObjectDetector:
+    """Short tracks of the observations in the odometry frame; `static(frame)` is what keyframes and the map see."""
+
+    def __init__(
+        self,
+        config: MovingObjectsConfig,
+        object_map: ObjectMapConfig,
+        footprints: dict[str, tuple[float, float]] | None = None,
+    ) -> None:
+        self.config = config
+        self.object_map = object_map
+        self.footprints = footprints
+        slots, length = config.max_tracks, config.track_length
+        self._labels: list[str | None] = [None] * slots
+        self._live = np.zeros(slots, dtype=bool)
+        self._moving = np.zeros(slots, dtype=bool)
+        self._seen = np.zeros(slots, dtype=int)  # observations ever joined
+        self._fitted = np.zeros(slots, dtype=int)  # observations in the fit (since the last ambiguous one)
+        self._last_time = np.zeros(slots)
+        self._times = np.zeros((slots, length))
+        self._points = np.zeros((slots, length, 2))
+        self._info = np.zeros((slots, length, 2, 2))  # zero: an empty entry of the ring
+        # The fit, at the time of the track's last observation: position, velocity as predicted with, Mahalanobis
+        # norm of the velocity, speed.
+        self._position = np.zeros((slots, 2))
+        self._velocity = np.zeros((slots, 2))
+        self._significance = np.zeros(slots)
+        self._speed = np.zeros(slots)
+        self._last_view = np.zeros((slots, 3))  # last observed centre, robot frame
+        self._last_row = np.zeros(slots, dtype=int)  # the frame (count of frames given) it was seen in
+        self._moving_id = np.full(slots, -1)  # numbered in the order the tracks were found moving
+        self._next_moving_id = 0
+        self._reported: list[tuple[int, str, np.ndarray, int, int]] = []  # ended moving tracks
+        self._passed: list[list[ObjectObservation]] = [[] for _ in range(slots)]  # views let through, latest
+        self._frames = 0
+        self.flagged = 0  # observations kept out as moving (or held while undecided)
+        self.retracted = 0  # views let through earlier, taken back out of the keyframe window
+
+    def static(self, frame: Frame, window: LocalObjectWindow | None = None) -> tuple[ObjectObservation, ...]:
+        """The frame's observations of objects not judged moving (all of them when disabled). The views of a track
+        let through before it was found moving are taken back out of the keyframe `window`: three early views
+        of a car make a window object that would stay in keyframes for the window's length."""
+        if not self.config.enabled:
+            return frame.observations
+        kept_out, tracks = self._kept_out(frame)
+        self.flagged += int(kept_out.sum())
+        for slot in np.unique(tracks[kept_out]):
+            if self._passed[slot] and window is not None:
+                self.retracted += window.retract(tuple(self._passed[slot]))
+            self._passed[slot] = []
+        length = self.config.track_length
+        for observation, slot, out in zip(frame.observations, tracks, kept_out, strict=True):
+            if not out:
+                self._passed[slot] = [*self._passed[slot][1 - length :], observation]
+        return tuple(o for o, out in zip(frame.observations, kept_out, strict=True) if not out)
+
+    def update(self, frame: Frame) -> np.ndarray:
+        """Track the frame's observations; per observation, True when it is kept out (moving, undecided, or not
+        judged yet with `hold_unjudged`)."""
+        return self._kept_out(frame)[0]
+
+    def _kept_out(self, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
+        """Per observation, whether it is kept out, and its track."""
+        row, self._frames = self._frames, self._frames + 1
+        self._end_unseen(frame.timestamp)
+        observations = frame.observations
+        if not observations:
+            return np.zeros(0, dtype=bool), np.zeros(0, dtype=int)
+        centres = np.array([o.center_camera for o in observations], dtype=float)
+        if self.footprints is not None:
+            centres = object_centres(observations, self.footprints)
+        in_robot = camera_points_to_robot(centres)
+        points = transform_points(frame.odometry_pose, in_robot)[:, :2]
+        rays = points - frame.odometry_pose[:2, 3]
+        rays /= np.maximum(np.linalg.norm(rays, axis=1, keepdims=True), 1e-9)
+        sigmas = observation_sigmas(observations, self.object_map)
+        labels = [o.label for o in observations]
+        tracks, ambiguous = self._assign(labels, points, rays, sigmas, frame.timestamp)
+        information = _information(rays, sigmas, self.object_map.position_sigma_floor)
+        for j, track in enumerate(tracks):
+            if track < 0:
+                predecessor = self._predecessor(labels[j], points[j], frame.timestamp, tracks)
+                tracks[j] = self._start(labels[j])
+                self._passed[tracks[j]] = list(self._passed[predecessor]) if predecessor >= 0 else []
+            if ambiguous[j]:
+                self._restart_fit(tracks[j])
+            self._append(tracks[j], frame.timestamp, points[j], information[j], in_robot[j], row)
+        self._fit(tracks)
+        self._judge(tracks)
+        judged = self._seen[tracks] >= self.config.judge_after
+        return self._moving[tracks] | self._suspect(tracks) | (self.config.hold_unjudged & ~judged), tracks
+
+    def _suspect(self, slots: np.ndarray) -> np.ndarray:
+        """Tracks not (yet) judged moving whose velocity is `hold_sigmas` stds from zero and fast enough: a car
+        still far and noisy; its views are held out until the evidence is in (a view let into a keyframe stays
+        in its window for window_length metres)."""
+        config = self.config
+        fast = self._speed[slots] >= config.min_speed
+        return ~self._moving[slots] & fast & (self._significance[slots] >= config.hold_sigmas)
+
+    def _assign(
+        self, labels: list[str], points: np.ndarray, rays: np.ndarray, sigmas: np.ndarray, time: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Per observation, the live track it joins (-1: none): pairs of one label inside the gate, nearest (in
+        distance scaled by the gate) first, a track and an observation in one pair at most; and whether that was
+        ambiguous (the observation in the gate of another track too, or the track's gate holding another
+        observation: far, noisy views of objects in a row can swap tracks, which then seem to move)."""
+        live = np.flatnonzero(self._live)
+        assigned = np.full(len(points), -1)
+        if len(live) == 0:
+            return assigned, np.zeros(len(points), dtype=bool)
+        predicted = self._position[live] + self._velocity[live] * (time - self._last_time[live])[:, None]
+        offsets = predicted[:, None, :] - points[None, :, :]  # (tracks, observations, 2)
+        along = np.einsum("toi,oi->to", offsets, rays)
+        across_squared = np.maximum(np.einsum("toi,toi->to", offsets, offsets) - along**2, 0.0)
+        radius = self.config.gate_radius
+        along_gate = np.maximum(radius, self.config.gate_sigmas * sigmas)
+        score = (along / along_gate) ** 2 + across_squared / radius**2
+        same_label = np.array([[self._labels[t] == label for label in labels] for t in live])
+        inside = same_label & (score <= 1.0)
+        track_rows, observation_rows = np.nonzero(inside)
+        order = np.lexsort((observation_rows, track_rows, score[track_rows, observation_rows]))
+        taken = np.zeros(len(live), dtype=bool)
+        for t, o in zip(track_rows[order], observation_rows[order], strict=True):
+            if not taken[t] and assigned[o] < 0:
+                taken[t], assigned[o] = True, live[t]
+        crowded = (inside.sum(axis=0) > 1) | (inside.sum(axis=1) > 1)[np.searchsorted(live, np.maximum(assigned, 0))]
+        return assigned, (assigned >= 0) & crowded
+
+    def _predecessor(self, label: str, point: np.ndarray, time: float, taken: np.ndarray) -> int:
+        """The live track of the label, not seen this frame, that could have reached `point` at `max_speed`
+        (nearest first; -1: none): a car's track may break while its velocity is still unsure, and the views it
+        let through must be taken back with the new track's when that one is found moving."""
+        candidates = np.flatnonzero(self._live)
+        candidates = [s for s in candidates if self._labels[s] == label and s not in taken]
+        if not candidates:
+            return -1
+        slots = np.asarray(candidates)
+        distance = np.linalg.norm(self._position[slots] - point, axis=1)
+        reach = self.config.gate_radius + self.config.max_speed * (time - self._last_time[slots])
+        inside = distance <= reach
+        return int(slots[inside][np.argmin(distance[inside])]) if inside.any() else -1
+
+    def _start(self, label: str) -> int:
+        """A new track in a free slot, or in the one unseen the longest when all are taken."""
+        free = np.flatnonzero(~self._live)
+        slot = int(free[0]) if len(free) else int(np.argmin(self._last_time))
+        if self._live[slot]:
+            self._end(np.array([slot]))
+        self._labels[slot] = label
+        self._live[slot], self._moving[slot], self._seen[slot] = True, False, 0
+        self._restart_fit(slot)
+        self._velocity[slot], self._significance[slot], self._speed[slot] = 0.0, 0.0, 0.0
+        self._moving_id[slot] = -1
+        self._passed[slot] = []
+        return slot
+
+    def _restart_fit(self, slot: int) -> None:
+        """Forget the track's observations in the fit (not its velocity, which it goes on predicting with)."""
+        self._info[slot] = 0.0
+        self._fitted[slot] = 0
+
+    def _append(
+        self, slot: int, time: float, point: np.ndarray, information: np.ndarray, view: np.ndarray, row: int
+    ) -> None:
+        entry = self._seen[slot] % self.config.track_length  # a ring: the oldest observation leaves
+        self._times[slot, entry], self._points[slot, entry], self._info[slot, entry] = time, point, information
+        self._seen[slot] += 1
+        self._fitted[slot] = min(self._fitted[slot] + 1, self.config.track_length)
+        self._last_time[slot], self._last_view[slot], self._last_row[slot] = time, view, row
+
+    def _fit(self, slots: np.ndarray) -> None:
+        """Constant-velocity weighted least squares of each track's observations, relative to its last one (time
+        and place): position now, velocity, its Mahalanobis norm; the velocity predicted with is shrunk by that
+        norm and bounded by `max_speed`. Where the observations scatter about the fitted line more than their noise
+        allows (a track that took another object's view, or a far view's skewed stereo depth), the velocity's
+        covariance grows by the reduced chi-square (the Birge ratio): a jump is no velocity."""
+        last = (self._seen - 1) % self.config.track_length
+        single = slots[self._fitted[slots] == 1]
+        self._position[single] = self._points[single, last[single]]  # a single view: the object is where it was seen
+        slots = slots[self._fitted[slots] >= 2]
+        if len(slots) == 0:
+            return
+        tau = self._times[slots] - self._last_time[slots, None]
+        origin = self._points[slots, last[slots]]
+        points = self._points[slots] - origin[:, None]
+        info = self._info[slots]
+        normal = np.zeros((len(slots), 4, 4))
+        normal[:, :2, :2] = info.sum(axis=1)
+        normal[:, :2, 2:] = np.einsum("sl,slij->sij", tau, info)
+        normal[:, 2:, :2] = normal[:, :2, 2:]
+        normal[:, 2:, 2:] = np.einsum("sl,slij->sij", tau**2, info)
+        weighted = np.einsum("slij,slj->sli", info, points)
+        rhs = np.concatenate([weighted.sum(axis=1), np.einsum("sl,sli->si", tau, weighted)], axis=1)
+        covariance = np.linalg.inv(normal)
+        solution = np.einsum("sij,sj->si", covariance, rhs)
+        velocity = solution[:, 2:]
+        residuals = points - solution[:, None, :2] - tau[:, :, None] * velocity[:, None, :]
+        misfit = np.einsum("sli,slij,slj->s", residuals, info, residuals)
+        freedom = 2 * self._fitted[slots] - 4
+        scatter = np.maximum(1.0, misfit / np.maximum(freedom, 1))  # beyond the noise: no constant velocity
+        inverse = np.linalg.inv(covariance[:, 2:, 2:])
+        significance = np.sqrt(np.einsum("si,sij,sj->s", velocity, inverse, velocity) / scatter)
+        mean = np.linalg.solve(normal[:, :2, :2], rhs[:, :2, None])[:, :, 0]  # constant position: weighted mean
+        sure = self.config.prediction_sigmas / np.maximum(significance, 1e-9)
+        # Two views fix a velocity with no check of their scatter (a view of the next car makes one): a track
+        # predicts with none before it is judged.
+        judged = self._fitted[slots] >= self.config.judge_after
+        shrink = np.where(judged, np.clip(1.0 - sure**2, 0.0, 1.0), 0.0)[:, None]
+        speed = np.linalg.norm(velocity, axis=1)
+        bounded = np.minimum(1.0, self.config.max_speed / np.maximum(speed, 1e-9))[:, None]
+        self._position[slots] = origin + (1.0 - shrink) * mean + shrink * solution[:, :2]
+        self._velocity[slots] = shrink * bounded * velocity
+        self._significance[slots], self._speed[slots] = significance, speed
+
+    def _judge(self, slots: np.ndarray) -> None:
+        """Tracks old enough to judge whose velocity is significant and fast enough move from now on."""
+        config = self.config
+        judged = self._fitted[slots] >= config.judge_after
+        moves = (
+            judged
+            & (self._significance[slots] >= config.significance_sigmas)
+            & (self._speed[slots] >= config.min_speed)
+        )
+        for slot in slots[moves & ~self._moving[slots]]:
+            self._moving[slot], self._moving_id[slot] = True, self._next_moving_id
+            self._next_moving_id += 1
+
+    def _end_unseen(self, time: float) -> None:
+        self._end(np.flatnonzero(self._live & (time - self._last_time > self.config.max_unseen)))
+
+    def _end(self, slots: np.ndarray) -> None:
+        for slot in slots[self._moving[slots]]:
+            label = self._labels[slot]
+            assert label is not None
+            record = (int(self._moving_id[slot]), label, self._last_view[slot].copy(), int(self._last_row[slot]))
+            self._reported.append((*record, int(self._seen[slot])))
+            self._moving_id[slot] = -1
+        self._live[slots] = False
+        self._moving[slots] = False
+        for slot in slots:
+            self._passed[slot] = []
+
+    def objects(self, poses: np.ndarray) -> list[MapObject]:
+        """Every moving object, where it was last seen in the map of `poses` (one T_world_robot per frame given,
+        in order: the corrected trajectory), ordered by id."""
+        live = [
+            (int(self._moving_id[s]), self._labels[s], self._last_view[s], int(self._last_row[s]), int(self._seen[s]))
+            for s in np.flatnonzero(self._live & self._moving)
+        ]
+        records = sorted(self._reported + live, key=lambda record: record[0])
+        return [
+            MapObject(identity, str(label), transform_points(poses[row], view[None])[0], seen)
+            for identity, label, view, row, seen in records
+        ]

@@ -1,0 +1,211 @@
+"""Moving objects: tracks in the odometry frame; a track whose velocity is significant against its stereo noise
+and fast enough is moving, and its observations are kept out of keyframes and the map."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+
+from neoslam.config import KeyframeConfig, MovingObjectsConfig, NeoSLAMConfig, ObjectMapConfig
+from neoslam.geometry import invert_pose, transform_points
+from neoslam.io.frames import robot_points_to_camera
+from neoslam.loop.keyframes import LocalObjectWindow
+from neoslam.mapping.moving_objects import MovingObjectDetector
+from neoslam.types import Frame, ObjectObservation
+
+PERIOD = 0.1  # s, KITTI's 10 Hz
+OBJECT_MAP = ObjectMapConfig()
+FX, BASELINE = 707.0912, 0.5372
+# Disparity noise that gives the object map's depth std (depth_sigma_at_1m * depth^2): the noise it allows for.
+DISPARITY_SIGMA = OBJECT_MAP.depth_sigma_at_1m * FX * BASELINE
+PIXEL_SIGMA = 1.0
+
+
+def robot_pose(x: float, y: float = 0.0) -> np.ndarray:
+    pose = np.eye(4)
+    pose[:2, 3] = x, y
+    return pose
+
+
+def measured(label: str, pose: np.ndarray, point, rng: np.random.Generator) -> ObjectObservation | None:
+    """The stereo camera's view of an object at a world point: disparity and pixel noise (depth error ~ depth^2);
+    None when behind the camera or nearer than 2 m."""
+    centre = robot_points_to_camera(transform_points(invert_pose(pose), np.asarray(point, float)[None]))[0]
+    if centre[2] < 2.0:
+        return None
+    disparity = FX * BASELINE / centre[2] + rng.normal(0.0, DISPARITY_SIGMA)
+    depth = FX * BASELINE / disparity
+    column = FX * centre[0] / centre[2] + rng.normal(0.0, PIXEL_SIGMA)
+    noisy = np.array([column * depth / FX, centre[1] * depth / centre[2], depth])
+    box = np.array([10.0, 10.0, 40.0, 40.0])
+    return ObjectObservation(label, 0.9, box, box, noisy, np.zeros((8, 8), np.uint8))
+
+
+def frame(index: int, pose: np.ndarray, observations: list[ObjectObservation | None]) -> Frame:
+    kept = tuple(o for o in observations if o is not None)
+    return Frame(index, index * PERIOD, pose, np.zeros(3), np.zeros(3), kept)
+
+
+def drive(objects: list[tuple[str, np.ndarray, np.ndarray]], frames: int, robot_speed: float, seed: int = 0):
+    """Frames of a robot driving along x past objects (label, start, velocity); yields the frame and, per object,
+    whether it was seen."""
+    rng = np.random.default_rng(seed)
+    for i in range(frames):
+        t = i * PERIOD
+        pose = robot_pose(robot_speed * t)
+        views = [measured(label, pose, start + velocity * t, rng) for label, start, velocity in objects]
+        yield frame(i, pose, views), [v is not None for v in views]
+
+
+def flags(detector: MovingObjectDetector, objects, frames: int, robot_speed: float, seed: int = 0) -> np.ndarray:
+    """(frames, objects): 1 kept out, 0 kept, -1 not seen."""
+    table = np.full((frames, len(objects)), -1)
+    for i, (f, seen) in enumerate(drive(objects, frames, robot_speed, seed)):
+        kept_out = detector.update(f)
+        table[i, np.flatnonzero(seen)] = kept_out
+    return table
+
+
+def detector(**changes) -> MovingObjectDetector:
+    return MovingObjectDetector(MovingObjectsConfig(**changes), OBJECT_MAP)
+
+
+def judge() -> MovingObjectDetector:
+    """A detector that holds nothing back: what it keeps out it has judged moving."""
+    return detector(hold_sigmas=MovingObjectsConfig().significance_sigmas)
+
+
+def first_flagged(column: np.ndarray) -> int:
+    """Frames from the first view to the first flag (the first view counts as frame 1)."""
+    seen = np.flatnonzero(column >= 0)
+    flagged = np.flatnonzero(column == 1)
+    assert len(flagged), "never flagged"
+    return int(np.count_nonzero(seen <= flagged[0]))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_static_objects_are_never_judged_moving_even_far(seed: int) -> None:
+    """Parked cars and people out to 40 m and more, with the stereo noise the depth model allows (2.5 times the
+    simulator's), from a robot driving by at 10 m/s and from one standing still."""
+    rng = np.random.default_rng(100 + seed)
+    xs = rng.uniform(10.0, 60.0, 20)
+    ys = rng.choice([-1.0, 1.0], 20) * rng.uniform(3.0, 20.0, 20)
+    labels = rng.choice(["car", "person"], 20)
+    objects = [(str(label), np.array([x, y, 0.0]), np.zeros(3)) for label, x, y in zip(labels, xs, ys, strict=True)]
+    for speed in (10.0, 0.0):
+        assert (flags(judge(), objects, 60, speed, seed) == 1).sum() == 0
+        held = flags(detector(), objects, 60, speed, seed)  # undecided views held back: a few
+        assert (held == 1).sum() <= 0.06 * (held >= 0).sum()
+
+
+def test_a_static_object_40_m_ahead_stays_static_for_long() -> None:
+    objects = [("car", np.array([40.0, 2.0, 0.0]), np.zeros(3))]
+    assert (flags(judge(), objects, 300, 0.0) == 1).sum() == 0
+
+
+@pytest.mark.parametrize(
+    ("start", "velocity", "within"),
+    [
+        ((30.0, -3.0, 0.0), (-8.0, 0.0, 0.0), 10),  # oncoming in the other lane, closing at 18 m/s
+        ((12.0, 0.0, 0.0), (8.0, 0.0, 0.0), 5),  # ahead, driving with the robot (the robot is faster)
+        ((30.0, 3.0, 0.0), (-12.0, 0.0, 0.0), 10),  # fast: 1.2 m a frame
+        ((-8.0, -3.0, 0.0), (14.0, 0.0, 0.0), 10),  # overtaking the robot from behind
+    ],
+)
+def test_a_car_driving_towards_or_with_the_robot_is_flagged_within_a_few_frames(start, velocity, within) -> None:
+    """At 30 m the depth noise the model allows is 1.35 m a view: a second of views tells 8 m/s from standing."""
+    objects = [("car", np.array(start), np.array(velocity))]
+    table = flags(detector(), objects, 30, 10.0)
+    assert first_flagged(table[:, 0]) <= within
+    seen = table[:, 0][table[:, 0] >= 0]
+    assert (seen[within:] == 1).all()  # and stays flagged: one track
+
+
+def test_a_person_walking_across_is_flagged() -> None:
+    objects = [("person", np.array([20.0, 6.0, 0.0]), np.array([0.0, -1.4, 0.0]))]
+    table = flags(detector(), objects, 60, 2.0)
+    assert first_flagged(table[:, 0]) <= 15
+
+
+def test_a_moving_car_among_parked_ones_leaves_them_static() -> None:
+    parked = [("car", np.array([x, side * 4.0, 0.0]), np.zeros(3)) for x in (15, 25, 35) for side in (-1, 1)]
+    mover = ("car", np.array([30.0, -2.0, 0.0]), np.array([-8.0, 0.0, 0.0]))
+    table = flags(judge(), [*parked, mover], 25, 8.0)
+    assert (table[:, :-1] == 1).sum() == 0
+    assert first_flagged(table[:, -1]) <= 15  # views in two gates restart the fit: slower among parked cars
+
+
+def test_unjudged_tracks_are_held_only_when_asked() -> None:
+    objects = [("car", np.array([20.0, 4.0, 0.0]), np.zeros(3))]
+    holding = detector(hold_unjudged=True, hold_sigmas=MovingObjectsConfig().significance_sigmas)
+    assert (flags(holding, objects, 5, 10.0)[:, 0] == [1, 1, 0, 0, 0]).all()
+    assert (flags(judge(), objects, 5, 10.0)[:, 0] == 0).all()
+
+
+def test_static_passes_observations_and_counts_flags() -> None:
+    objects = [("car", np.array([45.0, -3.0, 0.0]), np.array([-8.0, 0.0, 0.0]))]
+    on, off = detector(), detector(enabled=False)
+    for f, _ in drive(objects, 20, 10.0):
+        assert off.static(f) is f.observations
+        on.static(f)
+    assert on.flagged > 0 and off.flagged == 0
+
+
+def test_moving_objects_are_reported_where_last_seen() -> None:
+    objects = [("car", np.array([45.0, -3.0, 0.0]), np.array([-8.0, 0.0, 0.0]))]
+    found = detector()
+    frames = list(drive(objects, 20, 10.0))
+    for f, _ in frames:
+        found.update(f)
+    poses = np.array([f.odometry_pose for f, _ in frames])
+    (moving,) = found.objects(poses)
+    last = max(i for i, (_, seen) in enumerate(frames) if seen[0])
+    truth = objects[0][1] + objects[0][2] * last * PERIOD
+    assert moving.label == "car" and moving.id == 0
+    assert np.linalg.norm(moving.position[:2] - truth[:2]) < 1.5
+
+
+def test_tracks_end_and_memory_stays_bounded() -> None:
+    found = detector(max_tracks=8)
+    rng = np.random.default_rng(3)
+    for i in range(200):  # a new object every frame, each seen once (the robot stands)
+        pose = robot_pose(20.0 * i - 20.0)
+        found.update(frame(i, pose, [measured("car", pose, [20.0 * i, 5.0, 0.0], rng)]))
+    assert found._live.sum() <= 8
+    assert found.objects(np.tile(np.eye(4), (200, 1, 1))) == []
+
+
+def test_same_input_same_flags() -> None:
+    objects = [
+        ("car", np.array([45.0, -3.0, 0.0]), np.array([-8.0, 0.0, 0.0])),
+        ("car", np.array([30.0, 4.0, 0.0]), np.zeros(3)),
+        ("person", np.array([20.0, 6.0, 0.0]), np.array([0.0, -1.4, 0.0])),
+    ]
+    assert np.array_equal(flags(detector(), objects, 40, 8.0, 7), flags(detector(), objects, 40, 8.0, 7))
+
+
+@pytest.mark.parametrize(
+    "changes",
+    [{"gate_radius": 0}, {"significance_sigmas": -1}, {"min_speed": -0.5}, {"judge_after": 1}, {"max_tracks": 0},
+     {"track_length": 1}, {"max_unseen": float("inf")}, {"unknown": 1}],
+)  # fmt: skip
+def test_config_ranges_are_validated(changes: dict) -> None:
+    with pytest.raises(ValidationError):
+        MovingObjectsConfig(**changes)
+
+
+def test_config_section_is_registered() -> None:
+    config = NeoSLAMConfig.model_validate({"moving_objects": {"enabled": False, "min_speed": 1.0}})
+    assert config.moving_objects.enabled is False and config.moving_objects.min_speed == 1.0
+
+
+def test_views_let_through_are_taken_back_from_the_keyframe_window() -> None:
+    """An oncoming car's first views join the keyframe window before it is found moving; then they leave it."""
+    window = LocalObjectWindow(KeyframeConfig())
+    found = detector()
+    objects = [("car", np.array([30.0, -3.0, 0.0]), np.array([-8.0, 0.0, 0.0]))]
+    for f, _ in drive(objects, 20, 10.0):
+        window.add(f.odometry_pose, found.static(f, window), 10.0 * f.timestamp)
+    assert found.retracted > 0
+    assert window.objects == []
