@@ -102,6 +102,8 @@ def row(sequence: str, detector: str, profile: str, seed: int, metrics: dict[str
         "wall_s_baseline": baseline["timing"]["wall_s"],
         "wall_s_all": every["timing"]["wall_s"],
         "ms_per_frame_p95_all": every["timing"]["ms_per_frame_p95"],
+        "backend_s_baseline": baseline["timing"].get("backend_s"),
+        "backend_s_landmarks": metrics["landmarks"]["timing"].get("backend_s"),
     }
 
 
@@ -142,7 +144,8 @@ def main() -> None:
     print(markdown_table(rows, ["sequence", "detector", "profile", "seed", "frames", *ate]))
     loops = [f"{kind}_{step}" for step in ("baseline", "moving", "all") for kind in ("loops", "false", "recall")]
     print("\nLoop closures (accepted, false, recall), map objects and speed:\n")
-    speed = ["objects_baseline", "objects_all", "fps_baseline", "fps_landmarks", "fps_all", "ms_per_frame_p95_all"]
+    speed = ["objects_baseline", "objects_all", "fps_baseline", "fps_landmarks", "fps_all", "ms_per_frame_p95_all",
+             "backend_s_baseline", "backend_s_landmarks"]  # fmt: skip
     print(markdown_table(rows, ["sequence", "detector", "profile", "seed", *loops, *speed]))
     if len(seeds) > 1:
         keys = [*ate, *loops, *speed]

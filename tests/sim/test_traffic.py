@@ -35,11 +35,6 @@ LONG = np.arange(0.0, 1500.0, 1.3)  # s: several times the drive, so every mover
 
 
 @pytest.fixture(scope="module")
-def town_truth() -> Trajectory:
-    return drive_route(ROUTES["town"], CONFIG.frame_period, HEIGHT)
-
-
-@pytest.fixture(scope="module")
 def traffic_world(town_truth: Trajectory) -> World:
     rng = np.random.default_rng(3)
     return build_world(town_truth, WORLD, CONFIG.detection, HEIGHT, rng, ROUTES["town"].repeats)

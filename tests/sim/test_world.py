@@ -16,11 +16,6 @@ HEIGHT = CONFIG.camera.height_above_ground
 
 
 @pytest.fixture(scope="module")
-def town_truth() -> Trajectory:
-    return drive_route(ROUTES["town"], CONFIG.frame_period, HEIGHT)
-
-
-@pytest.fixture(scope="module")
 def town_world(town_truth: Trajectory) -> World:
     rng = np.random.default_rng(0)
     return build_world(town_truth, CONFIG.world, CONFIG.detection, HEIGHT, rng, ROUTES["town"].repeats)

@@ -46,7 +46,7 @@ import numpy as np
 from neoslam.config import ExperienceMapConfig, ObjectMapConfig
 from neoslam.loop.keyframes import footprint_radii
 from neoslam.mapping.graph import MapGraph
-from neoslam.mapping.pose_graph import ANCHOR_SIGMA, link_noise_model
+from neoslam.mapping.pose_graph import ANCHOR_SIGMA, link_noise_model, poses_from_values
 from neoslam.store.records import ObjectMapState
 
 __all__ = ["LOOP_ITERATIONS", "LandmarkSolver", "ObservationSource", "landmark_key"]
@@ -131,7 +131,7 @@ class LandmarkSolver:
         for _ in range(iterations):
             self._isam.update()
         self._estimate = self._isam.calculateEstimate()
-        graph.poses[self._nodes] = _poses(self._estimate, len(self._nodes))
+        graph.poses[self._nodes] = poses_from_values(self._estimate, len(self._nodes))
 
     def landmark_position(self, object_id: int) -> np.ndarray:
         """The solved position of an object landmark (world frame of the part)."""
@@ -275,12 +275,3 @@ def _isam(factorization: str) -> gtsam.ISAM2:
 def _ground_bearing(local: np.ndarray) -> float:
     """Angle of a point (experience frame) off the experience's heading in the ground plane, radians."""
     return float(np.arctan2(local[1], local[0]))
-
-
-def _poses(values: gtsam.Values, count: int) -> np.ndarray:
-    """(count, 4, 4) poses of the Values' Pose3s in key order; extractPose3 gives rows of [R row-major, t]."""
-    rows = gtsam.utilities.extractPose3(values)
-    poses = np.tile(np.eye(4), (count, 1, 1))
-    poses[:, :3, :3] = rows[:, :9].reshape(count, 3, 3)
-    poses[:, :3, 3] = rows[:, 9:]
-    return poses

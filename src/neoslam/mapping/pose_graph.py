@@ -16,7 +16,14 @@ import numpy as np
 from neoslam.config import ExperienceMapConfig
 from neoslam.mapping.graph import Link, MapGraph
 
-__all__ = ["LoopResidual", "PoseGraphReport", "link_noise_model", "link_sigmas", "optimise_pose_graph"]
+__all__ = [
+    "LoopResidual",
+    "PoseGraphReport",
+    "link_noise_model",
+    "link_sigmas",
+    "optimise_pose_graph",
+    "poses_from_values",
+]
 
 # Roll and pitch are observable from gravity, so links hold them tightly whatever the distance travelled.
 ROLL_PITCH_SIGMA_RAD = 0.01
@@ -75,7 +82,7 @@ def optimise_pose_graph(graph: MapGraph, config: ExperienceMapConfig) -> PoseGra
     initial = _initial_values(graph.poses)
     optimiser = gtsam.LevenbergMarquardtOptimizer(factors, initial, _lm_parameters())
     result = optimiser.optimize()
-    graph.poses[:] = _poses_from_values(result, len(graph))
+    graph.poses[:] = poses_from_values(result, len(graph))
     return PoseGraphReport(
         iterations=optimiser.iterations(),
         initial_error=factors.error(initial),
@@ -148,7 +155,7 @@ def _initial_values(poses: np.ndarray) -> gtsam.Values:
     return values
 
 
-def _poses_from_values(values: gtsam.Values, count: int) -> np.ndarray:
+def poses_from_values(values: gtsam.Values, count: int) -> np.ndarray:
     """(count, 4, 4) poses from Values keyed 0..count-1; extractPose3 gives rows of [R row-major (9), t (3)]."""
     rows = gtsam.utilities.extractPose3(values)
     poses = np.tile(np.eye(4), (count, 1, 1))
