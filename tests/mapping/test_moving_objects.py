@@ -122,9 +122,10 @@ def test_a_car_driving_towards_or_with_the_robot_is_flagged_within_a_few_frames(
     assert (seen[within:] == 1).all()  # and stays flagged: one track
 
 
-def test_a_person_walking_across_is_flagged() -> None:
+def test_a_person_walking_across_is_flagged_below_the_default_speed() -> None:
+    """The default min_speed (2 m/s) is for odometry as bad as `heavy`; with a lower one a walker is found."""
     objects = [("person", np.array([20.0, 6.0, 0.0]), np.array([0.0, -1.4, 0.0]))]
-    table = flags(detector(), objects, 60, 2.0)
+    table = flags(detector(min_speed=0.7), objects, 60, 2.0)
     assert first_flagged(table[:, 0]) <= 15
 
 
