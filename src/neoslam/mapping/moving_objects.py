@@ -38,19 +38,10 @@ from neoslam.config import MovingObjectsConfig, ObjectMapConfig
 from neoslam.geometry import transform_points
 from neoslam.io.frames import camera_points_to_robot
 from neoslam.loop.keyframes import LocalObjectWindow, object_centres
-from neoslam.mapping.object_map import MapObject
+from neoslam.mapping.object_map import MapObject, depth_sigmas
 from neoslam.types import Frame, ObjectObservation
 
-__all__ = ["MovingObjectDetector", "observation_sigmas"]
-
-
-def observation_sigmas(observations: tuple[ObjectObservation, ...], config: ObjectMapConfig) -> np.ndarray:
-    """Std of each observed centre along its viewing ray, as the object map weighs it: stereo depth error grows with
-    depth squared (or the front end's own measure, when larger), never below `position_sigma_floor`."""
-    depth = np.array([o.center_camera[2] for o in observations], dtype=float)
-    measured = np.array([o.depth_sigma or 0.0 for o in observations], dtype=float)
-    stereo = config.depth_sigma_at_1m * depth**2
-    return np.maximum(np.maximum(stereo, measured), config.position_sigma_floor)
+__all__ = ["MovingObjectDetector"]
 
 
 def _information(rays: np.ndarray, along: np.ndarray, across: float) -> np.ndarray:
@@ -134,7 +125,7 @@ class MovingObjectDetector:
         points = transform_points(frame.odometry_pose, in_robot)[:, :2]
         rays = points - frame.odometry_pose[:2, 3]
         rays /= np.maximum(np.linalg.norm(rays, axis=1, keepdims=True), 1e-9)
-        sigmas = observation_sigmas(observations, self.object_map)
+        sigmas = depth_sigmas(observations, self.object_map)  # as the object map weighs them
         labels = [o.label for o in observations]
         tracks, ambiguous = self._assign(labels, points, rays, sigmas, frame.timestamp)
         information = _information(rays, sigmas, self.object_map.position_sigma_floor)

@@ -32,7 +32,7 @@ from neoslam.loop.keyframes import object_centres
 from neoslam.store.records import ObjectMapState
 from neoslam.types import ObjectObservation
 
-__all__ = ["MapObject", "ObjectMap"]
+__all__ = ["MapObject", "ObjectMap", "depth_sigmas"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,6 +47,16 @@ REFRESH_SHIFT_M = 0.5  # refresh the corrected object positions once an experien
 INITIAL_CAPACITY = 256
 FORGET_EVERY_M = 5.0  # look for tentative objects to forget once per this much travel
 MERGE_EVERY_M = 50.0  # and for objects whose means have come within the association radius, once per this much
+
+
+def depth_sigmas(observations: tuple[ObjectObservation, ...], config: ObjectMapConfig) -> np.ndarray:
+    """Std of each observed centre along its viewing ray: stereo depth error grows with depth squared (or the front
+    end's own measure, when larger), and no centre is known better than `position_sigma_floor` (the visible surface,
+    not the object's middle)."""
+    depth = np.array([o.center_camera[2] for o in observations], dtype=float)
+    measured = np.array([o.depth_sigma or 0.0 for o in observations], dtype=float)
+    stereo = config.depth_sigma_at_1m * depth**2
+    return np.maximum(np.maximum(stereo, measured), config.position_sigma_floor)
 
 
 def _grown(array: np.ndarray, size: int) -> np.ndarray:
@@ -121,7 +131,7 @@ class ObjectMap:
         relative = transform_points(np.eye(4) if anchor_from_robot is None else anchor_from_robot, in_robot)
         rays = world[:, :2] - pose[:2, 3]  # in the ground plane; the robot frame's origin is the camera's
         rays /= np.maximum(np.linalg.norm(rays, axis=1, keepdims=True), 1e-9)
-        sigmas = self._depth_sigmas(observations)
+        sigmas = depth_sigmas(observations, self.config)
         ids = []
         for observation, point, local, ray, sigma in zip(observations, world, relative, rays, sigmas, strict=True):
             index = self._associate(observation.label, point, ray, float(sigma))
@@ -130,15 +140,6 @@ class ObjectMap:
                 self._last_seen[index] = odometer_m
             ids.append(index)
         return ids
-
-    def _depth_sigmas(self, observations: tuple[ObjectObservation, ...]) -> np.ndarray:
-        """Std of each observed centre along its viewing ray: stereo depth error grows with depth squared (or the
-        front end's own measure, when larger), and no centre is known better than `position_sigma_floor` (the
-        visible surface, not the object's middle)."""
-        depth = np.array([o.center_camera[2] for o in observations], dtype=float)
-        measured = np.array([o.depth_sigma or 0.0 for o in observations], dtype=float)
-        stereo = self.config.depth_sigma_at_1m * depth**2
-        return np.maximum(np.maximum(stereo, measured), self.config.position_sigma_floor)
 
     def _mean(self, index: int) -> np.ndarray:
         return self._sums[index] / self._weights[index]
