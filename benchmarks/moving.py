@@ -9,6 +9,8 @@ reported, and from the simulator's truth (truth/detections.csv: row -> object; t
 moving when its speed is > 0):
 - `moving_kept_out`: among the detections of moving objects in frames that made a keyframe, the share not in that
   keyframe (flagged moving, or fused into a window object the keyframe does not hold);
+- `moving_not_known`: the share not in that keyframe as an object known to be static (out of it, or in it as a
+  provisional object, which a match need not explain: `moving_objects.unjudged: wait`);
 - `static_flagged`: the share of all detections of static objects that the detector kept out as moving.
 Ground truth is read here for judging only; NeoSLAM sees the frames.
 
@@ -97,6 +99,10 @@ def _moving_rows(dataset: SimulatedDataset) -> np.ndarray:
     return moving, real
 
 
+def _share(part: int, whole: int) -> float:
+    return part / whole if whole else float("nan")
+
+
 def run_drive(job: dict) -> dict:
     """NeoSLAM over the drive with the detector on or off; each observation followed to the keyframe window
     object it joined (if any), and each keyframe checked for the moving objects' detections of its frame."""
@@ -122,7 +128,7 @@ def run_drive(job: dict) -> dict:
 
     slam.keyframes.window.add, slam.keyframes.add = record_window, record_keyframe
     passed = np.zeros(len(moving), dtype=bool)
-    moving_at_keyframes = kept_out = 0
+    moving_at_keyframes = kept_out = kept_provisional = 0
     for frame, rows in zip(dataset.frames(), dataset.detection_rows(), strict=True):
         if job["mode"] == "oracle":  # truth removes the moving objects' detections: the same street, parked only
             frame = replace(frame, observations=tuple(o for o, r in zip(frame.observations, rows, strict=True)
@@ -139,11 +145,11 @@ def run_drive(job: dict) -> dict:
             if not moving[row]:
                 continue
             window_object = joined.get(id(observation))
-            inside = window_object is not None and bool(
-                np.any(np.all(keyframe.centers == window_object.position, axis=1))
-            )
+            position = np.full(3, np.nan) if window_object is None else window_object.position
+            held = np.flatnonzero(np.all(keyframe.centers == position, axis=1))
             moving_at_keyframes += 1
-            kept_out += not inside
+            kept_out += len(held) == 0
+            kept_provisional += len(held) > 0 and bool(keyframe.provisional[held[0]])
     result = slam.result(np.zeros(len(dataset)))
     truth = dataset.ground_truth
     loops = loop_metrics(result.session_closures(), truth, config.evaluation, result.keyframe_frames)
@@ -162,7 +168,8 @@ def run_drive(job: dict) -> dict:
         "keyframes": len(result.keyframe_frames),
         "moving_detections": int(moving.sum()),
         "moving_at_keyframes": moving_at_keyframes,
-        "moving_kept_out": kept_out / moving_at_keyframes if moving_at_keyframes else float("nan"),
+        "moving_kept_out": _share(kept_out, moving_at_keyframes),
+        "moving_not_known": _share(kept_out + kept_provisional, moving_at_keyframes),
         "static_flagged": float(np.mean(~passed[static])) if static.any() else float("nan"),
     }
 
@@ -192,7 +199,7 @@ def main() -> None:
     )
     columns = ["sequence", "seed", "moving_fraction", "detector", "loop_precision", "loop_recall", "closures",
                "ate_corrected_m", "objects", "moving_reported", "moving_at_keyframes", "moving_kept_out",
-               "static_flagged"]  # fmt: skip
+               "moving_not_known", "static_flagged"]  # fmt: skip
     print(markdown_table(rows, columns))
     write_json(args.json, {"profile": args.profile, "detector": args.detector, "frames": frames, "rows": rows})
 

@@ -90,7 +90,9 @@ class NeoSLAM:
         self.object_vector_cells = ObjectVectorCells(config.object_vector)
         self.hebbian = HebbianMemory(config.hebbian)
         stored = stored if stored is not None else MapState()
-        self.keyframes = KeyframeBuilder(config.keyframes, first_id=stored.next_keyframe)
+        moving = config.moving_objects
+        provisional = moving.enabled and moving.unjudged == "wait"
+        self.keyframes = KeyframeBuilder(config.keyframes, stored.next_keyframe, provisional)
         self.loop_detector = LoopClosureDetector(config.keyframes, config.matching)
         self.object_map = ObjectMap(config.object_map, config.keyframes.footprints)
         self.moving_objects = MovingObjectDetector(

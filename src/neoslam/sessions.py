@@ -70,6 +70,7 @@ class StoredMap:
             transform_points(moved, keyframe.centers),
             keyframe.labels,
             keyframe.patches,
+            keyframe.provisional,
         )
 
     def relocalise(

@@ -57,9 +57,13 @@ class Keyframe:
     centers: np.ndarray  # (n, 3) object centres in the world frame
     labels: tuple[str, ...]
     patches: np.ndarray  # (n, h, w) uint8
+    # (n,) bool: objects not known to be static yet (moving_objects.unjudged: wait); None: none of them
+    provisional: np.ndarray | None = None
     distances: np.ndarray = field(init=False)  # (n, n) pairwise e_ij, eq. 1
 
     def __post_init__(self) -> None:
+        provisional = np.zeros(len(self.labels), dtype=bool) if self.provisional is None else self.provisional
+        object.__setattr__(self, "provisional", np.asarray(provisional, dtype=bool))
         diff = self.centers[:, None, :] - self.centers[None, :, :]
         object.__setattr__(self, "distances", np.linalg.norm(diff, axis=-1))
 

@@ -15,6 +15,7 @@ from neoslam.loop.matching import (
     principal_eigenvector,
     spectral_matching,
 )
+from neoslam.types import Keyframe
 
 CONFIG = MatchingConfig()
 E_MAX = KeyframeConfig().e_max
@@ -438,3 +439,22 @@ def test_a_match_without_distance_consistent_support_is_left_out_before_the_fit(
     match = match_keyframes(query, stored, TOLERANT, E_MAX)
     assert fits == [4]  # ... and never reaches the fit
     assert match.verified and sorted(match.pairs.tolist()) == [[0, 0], [1, 1], [2, 2], [3, 3]]
+
+
+def test_provisional_objects_still_count_in_the_share_a_match_must_explain(make_keyframe, make_street) -> None:
+    """6 of 10 match, short of 0.7 x 10, whether or not the other four are provisional: leaving them out of the
+    share let false closures through where most objects are provisional (heavy odometry)."""
+    query, stored = _copy(make_keyframe, make_street, np.random.default_rng(6), 10, 6)
+    strangers = np.arange(10) >= 6
+    marked = Keyframe(query.id, query.frame_index, query.pose, query.centers, query.labels, query.patches, strangers)
+    assert not match_keyframes(query, stored, TOLERANT, E_MAX).verified
+    assert not match_keyframes(marked, stored, TOLERANT, E_MAX).verified
+
+
+def test_a_provisional_stranger_is_no_contradiction(make_keyframe) -> None:
+    stored = _street_keyframe(make_keyframe, STREET)
+    centres, labels = np.vstack([STREET, [22.5, -8.0, 0.0]]), ["car"] * len(STREET) + ["bicycle"]
+    query = _street_keyframe(make_keyframe, centres, labels)
+    assert contradictions(query, stored, np.eye(4), CONFIG) == 1
+    marked = Keyframe(0, 0, query.pose, centres, tuple(labels), query.patches, np.arange(len(labels)) == len(STREET))
+    assert contradictions(marked, stored, np.eye(4), CONFIG) == 0

@@ -139,7 +139,7 @@ def test_a_moving_car_among_parked_ones_leaves_them_static() -> None:
 
 def test_unjudged_tracks_are_held_only_when_asked() -> None:
     objects = [("car", np.array([20.0, 4.0, 0.0]), np.zeros(3))]
-    holding = detector(hold_unjudged=True, hold_sigmas=MovingObjectsConfig().significance_sigmas)
+    holding = detector(unjudged="out", hold_sigmas=MovingObjectsConfig().significance_sigmas)
     assert (flags(holding, objects, 5, 10.0)[:, 0] == [1, 1, 0, 0, 0]).all()
     assert (flags(judge(), objects, 5, 10.0)[:, 0] == 0).all()
 
@@ -189,7 +189,7 @@ def test_same_input_same_flags() -> None:
 @pytest.mark.parametrize(
     "changes",
     [{"gate_radius": 0}, {"significance_sigmas": -1}, {"min_speed": -0.5}, {"judge_after": 1}, {"max_tracks": 0},
-     {"track_length": 1}, {"max_unseen": float("inf")}, {"unknown": 1}],
+     {"track_length": 1}, {"max_unseen": float("inf")}, {"unknown": 1}, {"unjudged": "hold"}],
 )  # fmt: skip
 def test_config_ranges_are_validated(changes: dict) -> None:
     with pytest.raises(ValidationError):
@@ -210,3 +210,53 @@ def test_views_let_through_are_taken_back_from_the_keyframe_window() -> None:
         window.add(f.odometry_pose, found.static(f, window), 10.0 * f.timestamp)
     assert found.retracted > 0
     assert window.objects == []
+
+
+def test_a_parked_car_is_provisional_in_keyframes_until_its_track_is_found_static() -> None:
+    """`unjudged: wait`: the window holds its first views at once; its object is provisional until the track is
+    found static (judge_after views, speed plus static_sigmas stds below min_speed), then the earlier views settle."""
+    window = LocalObjectWindow(KeyframeConfig(), marks_provisional=True)
+    found = detector()
+    objects = [("car", np.array([12.0, -4.0, 0.0]), np.zeros(3))]
+    settled = []
+    for f, _ in drive(objects, 8, 2.0):
+        window.add(f.odometry_pose, found.static(f, window), 2.0 * f.timestamp)
+        settled.append(window.objects[0].settled)
+    assert settled[:2] == [0, 0] and settled[-1] == 7  # the latest view settles with the next frame's
+    assert window.confirmed()[0].settled > 0
+
+
+def test_a_car_coming_on_from_far_is_not_found_static() -> None:
+    """Three views of a car 45 m ahead coming on at 8 m/s move mostly along the viewing ray, where stereo depth is
+    least sure: too few to call it moving, and not enough to call it static either."""
+    window = LocalObjectWindow(KeyframeConfig(), marks_provisional=True)
+    found = judge()
+    objects = [("car", np.array([45.0, -3.0, 0.0]), np.array([-8.0, 0.0, 0.0]))]
+    for f, _ in list(drive(objects, 3, 10.0)):
+        window.add(f.odometry_pose, found.static(f, window), 10.0 * f.timestamp)
+    assert found.flagged == 0 and len(window.confirmed()) == 1 and window.confirmed()[0].settled == 0
+
+
+def test_a_track_never_judged_settles_nothing() -> None:
+    """Two views of a car (a track broken off before it was judged) and a third from a new track: the window object
+    holds three views, none settled."""
+    found = detector(max_unseen=0.5)
+    window = LocalObjectWindow(KeyframeConfig(), marks_provisional=True)
+    objects = [("car", np.array([30.0, -4.0, 0.0]), np.zeros(3))]
+    frames = [f for f, _ in drive(objects, 8, 10.0)]
+    for f in (frames[0], frames[1], frames[7]):  # 0.6 s apart: the track ends (max_unseen 0.5 s)
+        window.add(f.odometry_pose, found.static(f, window), 10.0 * f.timestamp)
+    assert len(window.confirmed()) == 1 and window.objects[0].settled == 0
+
+
+def test_settled_views_taken_back_unsettle_their_object() -> None:
+    window = LocalObjectWindow(KeyframeConfig(), marks_provisional=True)
+    frames = [f for f, _ in drive([("car", np.array([30.0, -4.0, 0.0]), np.zeros(3))], 4, 10.0)]
+    for f in frames:
+        window.add(f.odometry_pose, f.observations, 10.0 * f.timestamp)
+    views = tuple(o for f in frames for o in f.observations)
+    window.settle(views[:2])
+    window.settle(views[:2])  # settling twice counts once
+    assert window.objects[0].settled == 2
+    window.retract(views[:2])
+    assert window.objects[0].settled == 0 and window.objects[0].observations == 2

@@ -61,6 +61,7 @@ class Growth:
             centers=rng.normal(0, 20, (n, 3)),
             labels=tuple(LABELS[i % len(LABELS)] for i in rng.integers(0, len(LABELS), n)),
             patches=rng.integers(0, 256, (n, self.patch, self.patch), dtype=np.uint8),
+            provisional=rng.random(n) < 0.3,
         )
 
     @cache  # noqa: B019

@@ -75,12 +75,13 @@ def test_round_trip_holds_every_part_of_the_map_exactly(tmp_path, growth, same_s
         name: value.dtype for name, value in state.object_vector_weights.items()
     }
     assert loaded.keyframes[0].patches.dtype == np.uint8 and loaded.keyframes[0].patches.shape == (4, 12, 12)
+    assert any(k.provisional.any() for k in loaded.keyframes) and loaded.keyframes[0].provisional.dtype == bool
     np.testing.assert_array_equal(loaded.keyframes[3].distances, state.keyframes[3].distances)
     cells.restore(loaded.object_vector_weights, loaded.object_vector_losses)  # the OVCN takes them back
     # the file is SQLite any tool reads, with the format in its meta table
     with sqlite3.connect(f"file:{path}?mode=ro", uri=True) as raw:
         meta = dict(raw.execute("SELECT key, value FROM meta"))
-    assert meta["format"] == "neoslam-map" and meta["format_version"] == "1"
+    assert meta["format"] == "neoslam-map" and meta["format_version"] == "2"
     assert json.loads(meta["config"]) == CONFIG.model_dump(mode="json")
 
 
@@ -255,9 +256,9 @@ def edited(path: Path, key: str, value: str) -> None:
 def test_refuses_another_format_version_or_neoslam_version(tmp_path, growth, read_only):
     path = tmp_path / "map.neoslam"
     made(path, growth)
+    edited(path, "format_version", "1")  # before keyframes held provisional objects
+    refused(path, "map format version 1; this NeoSLAM reads version 2", read_only=read_only)
     edited(path, "format_version", "2")
-    refused(path, "map format version 2; this NeoSLAM reads version 1", read_only=read_only)
-    edited(path, "format_version", "1")
     edited(path, "neoslam_version", "0.0.1")
     error = refused(path, "made by NeoSLAM 0.0.1; this is NeoSLAM ", read_only=read_only)
     assert map_file_module.__version__ in error.problem

@@ -6,7 +6,8 @@ the inverse-variance weighted mean of its observations, moved to the world with 
 that saw them. Every `spacing` metres of travel, the window object nearest to the robot becomes the current
 object and, with the window objects within `neighbourhood_radius` of it, a keyframe. On a sparse street, where
 fewer than `sparse_objects` stand that close, the neighbourhood grows (up to `sparse_neighbourhood_radius`) to
-take them.
+take them. With the motion detector's `unjudged: wait`, a window object none of whose views belongs to a track
+known to be static is provisional in the keyframe (see loop.matching).
 """
 
 from __future__ import annotations
@@ -67,6 +68,7 @@ class _WindowObject:
     patch_sum: np.ndarray
     observations: int
     last_seen_m: float  # odometer reading of the last observation
+    settled: int = 0  # views whose track the motion detector found static (LocalObjectWindow.settle)
 
     @property
     def position(self) -> np.ndarray:
@@ -78,9 +80,11 @@ class LocalObjectWindow:
     """Objects fused from the observations of the last `window_length` metres of travel."""
 
     config: KeyframeConfig
+    marks_provisional: bool = False  # objects without a settled view are provisional in keyframes (`unjudged: wait`)
     objects: list[_WindowObject] = field(default_factory=list)
     # id(view) -> (view, the object it joined, its weighted point, its weight), oldest first: what retract undoes.
     _taken: dict[int, tuple[ObjectObservation, _WindowObject, np.ndarray, float]] = field(default_factory=dict)
+    _settled: set[int] = field(default_factory=set)  # id(view) of the settled views held in _taken
 
     def add(
         self, pose: np.ndarray, observations: tuple[ObjectObservation, ...], odometer_m: float
@@ -107,7 +111,19 @@ class LocalObjectWindow:
         self.objects = kept
         for oldest in list(self._taken)[: max(len(self._taken) - RETRACTABLE_VIEWS, 0)]:
             del self._taken[oldest]
+        self._settled.intersection_update(self._taken)
         return joined
+
+    def settle(self, observations: tuple[ObjectObservation, ...]) -> None:
+        """Mark views fused earlier as views of a static object (their track was found static): with
+        `marks_provisional`, a window object is provisional in keyframes until it holds one. Views no longer held
+        are skipped."""
+        for observation in observations:
+            entry = self._taken.get(id(observation))
+            if entry is None or entry[0] is not observation or id(observation) in self._settled:
+                continue
+            entry[1].settled += 1
+            self._settled.add(id(observation))
 
     def retract(self, observations: tuple[ObjectObservation, ...]) -> int:
         """Take views fused earlier back out of their objects (views of an object since found moving); an object
@@ -122,6 +138,9 @@ class LocalObjectWindow:
             joined.weight -= weight
             joined.patch_sum -= observation.patch
             joined.observations -= 1
+            if id(observation) in self._settled:
+                self._settled.discard(id(observation))
+                joined.settled -= 1
             if joined.observations == 0:
                 self.objects = [o for o in self.objects if o is not joined]
             taken += 1
@@ -158,9 +177,12 @@ class LocalObjectWindow:
 class KeyframeBuilder:
     """Makes a keyframe every `spacing` metres of travel from the local window."""
 
-    def __init__(self, config: KeyframeConfig, first_id: int = 0) -> None:
+    def __init__(self, config: KeyframeConfig, first_id: int = 0, marks_provisional: bool = False) -> None:
+        """`marks_provisional`: a window object none of whose views the motion detector settled (found static) is
+        provisional in keyframes: a car's track that breaks off before it is found moving, or a far car coming on
+        whose first views are neither, leaves an object that a match need not explain."""
         self.config = config
-        self.window = LocalObjectWindow(config)
+        self.window = LocalObjectWindow(config, marks_provisional)
         self.odometer_m = 0.0
         self._next_keyframe_m = 0.0
         self.first_id = first_id  # ids continue those of a stored map
@@ -194,6 +216,7 @@ class KeyframeBuilder:
             centers=positions[around],
             labels=tuple(objects[i].label for i in around),
             patches=np.array([objects[i].patch_sum / objects[i].observations for i in around]),
+            provisional=np.array([objects[i].settled == 0 for i in around]) & self.window.marks_provisional,
         )
         self._next_id += 1
         self.frames.append(frame_index)

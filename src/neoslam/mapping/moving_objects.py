@@ -25,6 +25,10 @@ keyframe and no map object.
 - The views a track let through before it was found moving (or held) are taken back out of the keyframe window
   (`LocalObjectWindow.retract`), with those of the track it broke off from: three early views of a car make a
   window object that would otherwise stay in keyframes for the window's length. The object map keeps them.
+- With `unjudged: wait`, the views a track let through are settled in the keyframe window once the track is known
+  to be static (`_proven_static`: judged, and its speed plus `static_sigmas` stds below `min_speed`); a window
+  object with no settled view is provisional in keyframes (no contradiction to a match when missing). A track
+  known to be static is no predecessor of a new one (its views are not taken back with a car's).
 - Tracks end when unseen for `max_unseen` seconds; at most `max_tracks` are kept. Moving tracks are kept as a small
   record (label, last view, frame) to be reported in the corrected map. Deterministic: no randomness, ties broken
   by track and observation order.
@@ -78,12 +82,14 @@ class MovingObjectDetector:
         self._velocity = np.zeros((slots, 2))
         self._significance = np.zeros(slots)
         self._speed = np.zeros(slots)
+        self._speed_bound = np.full(slots, np.inf)  # speed + static_sigmas stds of the velocity along its worst axis
         self._last_view = np.zeros((slots, 3))  # last observed centre, robot frame
         self._last_row = np.zeros(slots, dtype=int)  # the frame (count of frames given) it was seen in
         self._moving_id = np.full(slots, -1)  # numbered in the order the tracks were found moving
         self._next_moving_id = 0
         self._reported: list[tuple[int, str, np.ndarray, int, int]] = []  # ended moving tracks
         self._passed: list[list[ObjectObservation]] = [[] for _ in range(slots)]  # views let through, latest
+        self._unsettled: list[list[ObjectObservation]] = [[] for _ in range(slots)]  # let through, not settled
         self._frames = 0
         self.flagged = 0  # observations kept out as moving (or held while undecided)
         self.retracted = 0  # views let through earlier, taken back out of the keyframe window
@@ -91,7 +97,8 @@ class MovingObjectDetector:
     def static(self, frame: Frame, window: LocalObjectWindow | None = None) -> tuple[ObjectObservation, ...]:
         """The frame's observations of objects not judged moving (all of them when disabled). The views of a track
         let through before it was found moving are taken back out of the keyframe `window`: three early views
-        of a car make a window object that would stay in keyframes for the window's length."""
+        of a car make a window object that would stay in keyframes for the window's length. The views a track let
+        through are settled in the window once it is known to be static (`unjudged: wait`)."""
         if not self.config.enabled:
             return frame.observations
         kept_out, tracks = self._kept_out(frame)
@@ -99,16 +106,22 @@ class MovingObjectDetector:
         for slot in np.unique(tracks[kept_out]):
             if self._passed[slot] and window is not None:
                 self.retracted += window.retract(tuple(self._passed[slot]))
-            self._passed[slot] = []
+            self._passed[slot], self._unsettled[slot] = [], []
         length = self.config.track_length
-        for observation, slot, out in zip(frame.observations, tracks, kept_out, strict=True):
-            if not out:
-                self._passed[slot] = [*self._passed[slot][1 - length :], observation]
+        proven = self._proven_static(tracks)
+        for observation, slot, out, static in zip(frame.observations, tracks, kept_out, proven, strict=True):
+            if out:
+                continue
+            self._passed[slot] = [*self._passed[slot][1 - length :], observation]
+            if static and window is not None:  # the views before this frame's: this one joins the window next
+                window.settle(tuple(self._unsettled[slot]))
+                self._unsettled[slot] = []
+            self._unsettled[slot] = [*self._unsettled[slot][1 - length :], observation]
         return tuple(o for o, out in zip(frame.observations, kept_out, strict=True) if not out)
 
     def update(self, frame: Frame) -> np.ndarray:
         """Track the frame's observations; per observation, True when it is kept out (moving, undecided, or not
-        judged yet with `hold_unjudged`)."""
+        judged yet with `unjudged: out`)."""
         return self._kept_out(frame)[0]
 
     def _kept_out(self, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
@@ -139,8 +152,15 @@ class MovingObjectDetector:
             self._append(tracks[j], frame.timestamp, points[j], information[j], in_robot[j], row)
         self._fit(tracks)
         self._judge(tracks)
-        judged = self._seen[tracks] >= self.config.judge_after
-        return self._moving[tracks] | self._suspect(tracks) | (self.config.hold_unjudged & ~judged), tracks
+        unjudged_out = (self._seen[tracks] < self.config.judge_after) & (self.config.unjudged == "out")
+        return self._moving[tracks] | self._suspect(tracks) | unjudged_out, tracks
+
+    def _proven_static(self, slots: np.ndarray) -> np.ndarray:
+        """Tracks judged whose speed, `static_sigmas` stds of their velocity added, is below min_speed: a car far
+        ahead coming on moves its few views mostly along the viewing ray, where stereo depth is least sure, so three
+        views of it are not moving enough to be judged so, yet not enough to know it parked either."""
+        judged = self._seen[slots] >= self.config.judge_after
+        return judged & ~self._moving[slots] & (self._speed_bound[slots] < self.config.min_speed)
 
     def _suspect(self, slots: np.ndarray) -> np.ndarray:
         """Tracks not (yet) judged moving whose velocity is `hold_sigmas` stds from zero and fast enough: a car
@@ -183,7 +203,7 @@ class MovingObjectDetector:
         """The live track of the label, not seen this frame, that could have reached `point` at `max_speed`
         (nearest first; -1: none): a car's track may break while its velocity is still unsure, and the views it
         let through must be taken back with the new track's when that one is found moving."""
-        candidates = np.flatnonzero(self._live)
+        candidates = np.flatnonzero(self._live & ~self._proven_static(np.arange(len(self._live))))
         candidates = [s for s in candidates if self._labels[s] == label and s not in taken]
         if not candidates:
             return -1
@@ -203,8 +223,9 @@ class MovingObjectDetector:
         self._live[slot], self._moving[slot], self._seen[slot] = True, False, 0
         self._restart_fit(slot)
         self._velocity[slot], self._significance[slot], self._speed[slot] = 0.0, 0.0, 0.0
+        self._speed_bound[slot] = np.inf
         self._moving_id[slot] = -1
-        self._passed[slot] = []
+        self._passed[slot], self._unsettled[slot] = [], []
         return slot
 
     def _restart_fit(self, slot: int) -> None:
@@ -252,6 +273,7 @@ class MovingObjectDetector:
         freedom = 2 * self._fitted[slots] - 4
         scatter = np.maximum(1.0, misfit / np.maximum(freedom, 1))  # beyond the noise: no constant velocity
         inverse = np.linalg.inv(covariance[:, 2:, 2:])
+        widest = np.sqrt(np.linalg.eigvalsh(covariance[:, 2:, 2:])[:, -1] * scatter)
         significance = np.sqrt(np.einsum("si,sij,sj->s", velocity, inverse, velocity) / scatter)
         mean = np.linalg.solve(normal[:, :2, :2], rhs[:, :2, None])[:, :, 0]  # constant position: weighted mean
         sure = self.config.prediction_sigmas / np.maximum(significance, 1e-9)
@@ -264,6 +286,7 @@ class MovingObjectDetector:
         self._position[slots] = origin + (1.0 - shrink) * mean + shrink * solution[:, :2]
         self._velocity[slots] = shrink * bounded * velocity
         self._significance[slots], self._speed[slots] = significance, speed
+        self._speed_bound[slots] = speed + self.config.static_sigmas * widest
 
     def _judge(self, slots: np.ndarray) -> None:
         """Tracks old enough to judge whose velocity is significant and fast enough move from now on."""
@@ -291,7 +314,7 @@ class MovingObjectDetector:
         self._live[slots] = False
         self._moving[slots] = False
         for slot in slots:
-            self._passed[slot] = []
+            self._passed[slot], self._unsettled[slot] = [], []
 
     def objects(self, poses: np.ndarray) -> list[MapObject]:
         """Every moving object, where it was last seen in the map of `poses` (one T_world_robot per frame given,
