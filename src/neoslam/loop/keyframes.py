@@ -180,7 +180,7 @@ class KeyframeBuilder:
     def __init__(self, config: KeyframeConfig, first_id: int = 0, marks_provisional: bool = False) -> None:
         """`marks_provisional`: a window object none of whose views the motion detector settled (found static) is
         provisional in keyframes: a car's track that breaks off before it is found moving, or a far car coming on
-        whose first views are neither, leaves an object that a match need not explain."""
+        whose first views are neither, leaves an object that is no contradiction to a match when it is missing."""
         self.config = config
         self.window = LocalObjectWindow(config, marks_provisional)
         self.odometer_m = 0.0
