@@ -10,7 +10,7 @@ moving when its speed is > 0):
 - `moving_kept_out`: among the detections of moving objects in frames that made a keyframe, the share not in that
   keyframe (flagged moving, or fused into a window object the keyframe does not hold);
 - `moving_not_known`: the share not in that keyframe as an object known to be static (out of it, or in it as a
-  provisional object, which a match need not explain: `moving_objects.unjudged: wait`);
+  provisional object, which is no contradiction to a match when missing: `moving_objects.unjudged: wait`);
 - `static_flagged`: the share of all detections of static objects that the detector kept out as moving.
 Ground truth is read here for judging only; NeoSLAM sees the frames.
 

@@ -142,7 +142,7 @@ def _required_matches(query: Keyframe, stored: Keyframe, config: MatchingConfig)
 
 def _known(keyframe: Keyframe) -> np.ndarray:
     """Bool per object: known to be static (not provisional), so a place seen again must show it."""
-    return ~np.asarray(keyframe.provisional, dtype=bool)
+    return ~keyframe.provisional
 
 
 def _horizontal_residuals(transform: np.ndarray, query: np.ndarray, stored: np.ndarray) -> np.ndarray:
