@@ -85,7 +85,7 @@ def run_drive(path: Path, config: NeoSLAMConfig) -> dict:
     run_s = time.perf_counter() - start
     truth = dataset.ground_truth
     correct = judge_closures(result.session_closures(), truth.positions[:, :2], LoopCriteria())
-    solver = result.experience_map.landmark_solver
+    solver = result.experience_map.backend.landmark_solver
     return {
         "ate_odometry_m": absolute_trajectory_error(result.odometry, truth, "se3").rmse,
         "ate_corrected_m": absolute_trajectory_error(result.estimate, truth, "se3").rmse,
@@ -93,7 +93,7 @@ def run_drive(path: Path, config: NeoSLAMConfig) -> dict:
         "loops_false": int((~correct).sum()),
         "objects": len(result.objects),
         "landmark_objects": 0 if solver is None else len(solver.landmarks),
-        "backend_s": result.experience_map.backend_seconds,
+        "backend_s": result.experience_map.backend.seconds,
         "run_s": run_s,
     }
 

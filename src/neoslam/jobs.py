@@ -236,7 +236,7 @@ def _metrics(dataset: Dataset, result: RunResult, config: NeoSLAMConfig, wall_s:
     metrics["moving_observations"] = result.moving_observations
     metrics["cells"] = cell_metrics(result.cell_states, result.odometry, result.object_vector_cells)
     metrics["timing"] = timing_metrics(result.frame_times_s, wall_s)
-    metrics["timing"]["backend_s"] = experience_map.backend_seconds  # in the pose-graph solvers, summed
+    metrics["timing"]["backend_s"] = experience_map.backend.seconds  # in the pose-graph solvers, summed
     if isinstance(dataset, ImageDataset):
         metrics["perception"] = dataset.front_end.times.summary()
     return metrics

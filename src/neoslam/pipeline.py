@@ -99,7 +99,7 @@ class NeoSLAM:
             config.moving_objects, config.object_map, config.keyframes.footprints
         )
         self.experience_map = ExperienceMap(config.experience_map, self.grid_cells.dims, config.head_direction.cells)
-        self.experience_map.landmark_source = self.object_map  # its objects, landmarks with object_landmarks
+        self.experience_map.backend.landmark_source = self.object_map  # its objects, landmarks with object_landmarks
         self.detected_closures: list[LoopClosure] = []  # accepted by the loop-closure detector
         self.loop_closures: list[LoopClosure] = []  # and by the experience map's grid-cell check
         self._previous_odometry: np.ndarray | None = None

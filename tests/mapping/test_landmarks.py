@@ -207,7 +207,7 @@ def run_block(frames, experience_map: dict, source: bool = True):
     config = config.model_copy(update={"experience_map": config.experience_map.model_copy(update=experience_map)})
     slam = NeoSLAM(config)
     if not source:
-        slam.experience_map.landmark_source = None  # the map as it was before landmarks existed
+        slam.experience_map.backend.landmark_source = None  # the map as it was before landmarks existed
     for frame in frames:
         slam.step(frame)
     return slam.result(np.zeros(len(frames)))
@@ -231,7 +231,7 @@ def test_a_run_with_landmarks_is_deterministic_and_no_worse(block_frames):
     first = run_block(frames, {"object_landmarks": True})
     second = run_block(frames, {"object_landmarks": True})
     assert first.estimate.poses.tobytes() == second.estimate.poses.tobytes()
-    assert first.experience_map.uses_landmarks and first.experience_map.backend_seconds > 0
+    assert first.experience_map.backend.uses_landmarks and first.experience_map.backend.seconds > 0
     off = run_block(frames, {"object_landmarks": False})
     error = absolute_trajectory_error(first.estimate, truth, "se3").rmse
     assert error <= absolute_trajectory_error(off.estimate, truth, "se3").rmse + 0.05
@@ -263,7 +263,7 @@ def test_a_later_session_rebuilds_the_solver_in_the_joined_map(tmp_path):
         slam.step(frame)
     result = slam.result(np.zeros(0))
     assert result.session.relocalised_frame is not None
-    solver = result.experience_map.landmark_solver
+    solver = result.experience_map.backend.landmark_solver
     assert solver is not None and solver.nodes.min() == 0 and solver.nodes.max() >= stored_experiences
 
 

@@ -1,5 +1,5 @@
 """The object experience map (paper 3.6, eq. 15-18): experiences of the cells' state, linked by odometry and by
-loop closures, corrected by relaxation (the paper) or pose-graph optimisation (beyond it).
+loop closures, corrected by relaxation (the paper) or pose-graph optimisation (beyond it; neoslam.mapping.backend).
 
 An experience exp = [P_gc, P_hdc, Xr, KF] (eq. 16) is made for every new keyframe (a new template, NeuroSLAM's rule)
 and when the decoded cells have moved more than S_max from the current experience's (eq. 17: stretches without
@@ -34,19 +34,16 @@ frame. The grid-cell check compares experiences of one session only: two session
 
 from __future__ import annotations
 
-import time
 from array import array
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from neoslam.config import ExperienceMapConfig
 from neoslam.geometry import invert_pose, rotation_angle, yaw_of
+from neoslam.mapping.backend import MapBackend
 from neoslam.mapping.graph import Link, MapGraph
-from neoslam.mapping.landmarks import LOOP_ITERATIONS, LandmarkSolver, ObservationSource
 from neoslam.mapping.parts import MapParts
-from neoslam.mapping.pose_graph import optimise_pose_graph
-from neoslam.mapping.relaxation import LinkMeasurement, link_measurement, relax
 from neoslam.store.records import MapState
 from neoslam.types import Experience, LoopClosure, Trajectory
 
@@ -93,7 +90,6 @@ class ExperienceMap:
         self.graph = MapGraph()
         self.parts = MapParts()
         self.session = 1  # the session whose experiences this run makes
-        self._measurements: list[LinkMeasurement] = []
         self._odometry_poses: list[np.ndarray] = []  # each experience's odometry pose when it was made
         self._by_keyframe: dict[int, int] = {}
         self._merged: dict[int, tuple[int, np.ndarray]] = {}  # recent keyframes merged: (experience, T_exp_robot)
@@ -113,11 +109,7 @@ class ExperienceMap:
         self._made_at: list[float] = []  # odometer reading when each experience was made (closure gate: drift)
         self.rejected_closures: list[LoopClosure] = []
         self.accepted_closures: list[LoopClosure] = []
-        self.landmark_source: ObservationSource | None = None  # the object map, for object_landmarks
-        self._landmarks: LandmarkSolver | None = None  # built on first use, rebuilt after a restore or a join
-        self._landmark_part = -1  # the part the landmark solver holds
-        self._solved_visit = 0  # the visit that was current at the last landmark solve
-        self.backend_seconds = 0.0  # wall time in the pose-graph solvers (timing only: never read by the map)
+        self.backend = MapBackend(config)  # corrects the graph (relaxation, pose graph, object landmarks)
 
     @property
     def current(self) -> int:
@@ -127,6 +119,15 @@ class ExperienceMap:
     def visits(self) -> int:
         """How many times an experience was entered (made or re-entered)."""
         return len(self._visit_experience)
+
+    @property
+    def odometer(self) -> float:
+        """Metres travelled (reversing counts too)."""
+        return self._odometer
+
+    def visited_experiences(self) -> np.ndarray:
+        """The experience entered at each visit, in order."""
+        return np.frombuffer(self._visit_experience, dtype=self._visit_experience.typecode)
 
     @property
     def localised(self) -> bool:
@@ -205,84 +206,21 @@ class ExperienceMap:
     def _link(self, link: Link) -> None:
         self.graph.add_link(link)
         self.parts.link(link.source, link.target)
-        self._measurements.append(link_measurement(self.graph, link))
+        self.backend.linked(self.graph, link)
         self._linked.add((min(link.source, link.target), max(link.source, link.target)))
 
     def _is_linked(self, a: int, b: int) -> bool:
         return (min(a, b), max(a, b)) in self._linked
 
     def _optimise(self) -> None:
-        """The pose graph of the robot's part of the map (the whole map unless it holds sessions not joined)."""
         self._unoptimised = 0
-        if self.config.backend != "pose-graph":
-            return
-        start = time.perf_counter()
-        if self.uses_landmarks:
-            self._solve_landmarks(LOOP_ITERATIONS)
-        else:
-            self._optimise_pose_graph()
-        self.backend_seconds += time.perf_counter() - start
-
-    def _optimise_pose_graph(self) -> None:
-        part = self.parts.members(self.parts.part_of(self.current))
-        if part.all():
-            optimise_pose_graph(self.graph, self.config)
-            return
-        nodes = np.flatnonzero(part)
-        renumbered = np.full(len(part), -1)
-        renumbered[nodes] = np.arange(len(nodes))  # the part's first node, its frame's anchor, becomes node 0
-        links = [
-            replace(link, source=int(renumbered[link.source]), target=int(renumbered[link.target]))
-            for link in self.graph.links
-            if part[link.source]
-        ]
-        piece = MapGraph(self.graph.poses[nodes].copy(), links)
-        optimise_pose_graph(piece, self.config)
-        self.graph.poses[nodes] = piece.poses
+        self.backend.optimise(self)
 
     def finish(self) -> None:
-        """Optimise the links still waiting (see BATCHED_LINKS): the map as the last frame leaves it. With object
-        landmarks, also the observations of the experience the robot is in."""
-        if self.uses_landmarks and self._current >= 0:
-            start = time.perf_counter()
-            self._solve_landmarks(LOOP_ITERATIONS if self._unoptimised else 0, final=True)
-            self.backend_seconds += time.perf_counter() - start
-            self._unoptimised = 0
-        elif self._unoptimised:
-            self._optimise()
-
-    @property
-    def uses_landmarks(self) -> bool:
-        """Whether the pose graph holds the object map's objects as landmarks (experience_map.object_landmarks)."""
-        return self.config.object_landmarks and self.config.backend == "pose-graph" and self.landmark_source is not None
-
-    @property
-    def landmark_solver(self) -> LandmarkSolver | None:
-        """The iSAM2 solver of the robot's part with the object landmarks (None: not used, or not yet built)."""
-        return self._landmarks
-
-    def _landmarks_due(self) -> bool:
-        """Whether the landmark solver has something to add: no solver yet, or an experience the robot left."""
-        if not self.uses_landmarks or self._current < 0:
-            return False
-        return self._landmarks is None or self.visits - 1 > self._solved_visit
-
-    def _solve_landmarks(self, iterations: int = 0, final: bool = False) -> None:
-        """Bring the landmark solver up to date: the experiences and links made since its last update and the
-        observation sums of the experiences left since (with `final`, of the current one too); a new solver for
-        the robot's part the first time, after a restore or a join, or when the robot's part is another."""
-        assert self.landmark_source is not None
-        part = self.parts.part_of(self.current)
-        if self._landmarks is None or self._landmark_part != part:
-            self._landmarks, self._landmark_part = LandmarkSolver(self.config), part
-            left = np.arange(len(self.experiences))
-        else:
-            visits = np.frombuffer(self._visit_experience, dtype=self._visit_experience.typecode)
-            left = np.unique(visits[self._solved_visit : self.visits - 1])
-        current = -1 if final else self.current
-        self._landmarks.odometer, self._landmarks.localised = self._odometer, self.localised
-        self._landmarks.update(self.graph, self.parts.members(part), self.landmark_source, left, current, iterations)
-        self._solved_visit = self.visits - 1
+        """Optimise the links still waiting (see BATCHED_LINKS): the map as the last frame leaves it (with object
+        landmarks, also the observations of the experience the robot is in)."""
+        self.backend.finish(self, waiting=self._unoptimised > 0)
+        self._unoptimised = 0
 
     def recognise(
         self, keyframe_id: int, closures: list[LoopClosure], cells: CellState, odometry_pose: np.ndarray
@@ -452,15 +390,13 @@ class ExperienceMap:
             moved, moving = invert_pose(moved), there
         members = self.parts.members(moving)
         self.graph.poses[members] = moved @ self.graph.poses[members]
-        self._landmarks = None  # rebuilt from the moved graph at the next solve
-        self._measurements = [link_measurement(self.graph, link) for link in self.graph.links]
+        self.backend.rebuild(self.graph)
         return moving == here
 
     def restore(self, state: MapState, session: int) -> None:
         """Start from a stored map: its experiences, corrected poses and links; this run's experiences belong to
         `session` and start a part of the map of their own."""
         self.session = session
-        self._landmarks = None  # rebuilt from the restored graph at the next solve
         self.experiences = list(state.experiences)
         self.graph = MapGraph(np.array(state.experience_poses, dtype=float).reshape(-1, 4, 4), [])
         self.parts = MapParts()
@@ -471,20 +407,11 @@ class ExperienceMap:
         self._odometry_poses = [e.pose for e in self.experiences]
         self._made_at = [-np.inf] * len(self.experiences)  # another session's: the gate does not compare its cells
         self._by_keyframe = dict(state.keyframe_experience)
+        self.backend.rebuild(self.graph)
 
     def correct(self) -> None:
-        """Per frame: the paper's relaxation passes, once the map has a loop to relax; with object landmarks, an
-        iSAM2 update whenever the robot has left an experience (its observation sums are then complete)."""
-        if self._landmarks_due():
-            start = time.perf_counter()
-            self._solve_landmarks()
-            self.backend_seconds += time.perf_counter() - start
-        if self.config.backend == "relaxation" and self.accepted_closures:
-            measurements = self._measurements
-            if len(self.parts.roots()) > 1:  # the robot's part only: a stored session not joined stays as stored
-                part = self.parts.members(self.parts.part_of(self.current))
-                measurements = [m for m in measurements if part[m[0]]]
-            relax(self.graph, measurements, self.config.correction_factor, self.config.correction_loops)
+        """Per frame: the back end's correction (relaxation once the map has a loop; landmark updates)."""
+        self.backend.correct(self, has_loop=bool(self.accepted_closures))
 
     @property
     def keyframe_experiences(self) -> dict[int, int]:
@@ -519,7 +446,7 @@ class ExperienceMap:
         """A pose for every frame: the corrected pose of the experience it was in, moved on by the odometry since
         the robot entered it."""
         visits = np.frombuffer(self._frame_visit, dtype=self._frame_visit.typecode).astype(int)
-        owner = np.frombuffer(self._visit_experience, dtype=self._visit_experience.typecode).astype(int)[visits]
+        owner = self.visited_experiences().astype(int)[visits]
         anchors = self._visit_anchors[visits]
         poses = self.graph.poses[owner] @ invert_pose(anchors) @ odometry_poses
         return Trajectory(np.asarray(timestamps), poses)
