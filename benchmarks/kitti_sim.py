@@ -12,11 +12,13 @@ simulation): on a local pool, one worker per core, or on a Ray cluster (`--ray A
 sweep folder, and running again resumes it. Timing columns are per run.
 
     python benchmarks/kitti_sim.py [--quick] [--json FILE] [--sequences 05 08] [--profiles vo] [--seeds 1 2 3]
-                                   [--detectors real ideal] [--moving 0.2] [--out DIR] [--workers N] [--ray ADDRESS]
+                                   [--detectors real ideal] [--moving 0.2] [--config FILE.yaml] [--out DIR]
+                                   [--workers N] [--ray ADDRESS]
 
 `--detectors`: the simulator's detection profiles (default: real, the street and detector calibrated to the real
 front end on KITTI 06, and ideal, the richer street of the first benchmarks). `--moving`: share of moving objects
-(default 0.2, the issue's setting; 0 gives static streets).
+(default 0.2, the issue's setting; 0 gives static streets). `--config`: config values put under every run (over
+the steps' own), e.g. `benchmarks/specs/heavy_odometry.yaml`, the motion detector told how noisy `heavy` odometry is.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
 from _sweep import SPECS, run_spec, sweep_options, with_changes  # noqa: E402
+from neoslam.config import load_config  # noqa: E402
 from neoslam.sim.profiles import DETECTION_PROFILES  # noqa: E402
 from neoslam.sweep import load_spec  # noqa: E402
 
@@ -46,13 +49,25 @@ def _arguments(parser) -> None:
     parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
     parser.add_argument("--detectors", nargs="+", default=DETECTORS, choices=sorted(DETECTION_PROFILES))
     parser.add_argument("--moving", type=float, default=MOVING, help="share of the street's objects that move")
+    parser.add_argument("--config", type=Path, help="a config file whose values every run takes (see above)")
     sweep_options(parser)
 
 
-def _on_street(overrides: dict, moving: float) -> dict:
-    """Every override simulates the same street, with a share `moving` of its objects moving."""
-    street = {"simulator": {"world": {"moving_fraction": moving}}}
-    return {name: values | street for name, values in overrides.items()}
+def _on_street(overrides: dict, moving: float, config: Path | None) -> dict:
+    """Every override simulates the same street, with a share `moving` of its objects moving, and takes the values
+    of the config file."""
+    common = load_config(config, environ={}).model_dump(exclude_unset=True) if config else {}
+    common = _merged(common, {"simulator": {"world": {"moving_fraction": moving}}})
+    return {name: _merged(values, common) for name, values in overrides.items()}
+
+
+def _merged(base: dict, extra: dict) -> dict:
+    """`base` with the values of `extra`, section by section."""
+    merged = dict(base)
+    for key, value in extra.items():
+        inner = merged.get(key)
+        merged[key] = _merged(inner, value) if isinstance(inner, dict) and isinstance(value, dict) else value
+    return merged
 
 
 def _drives(records) -> tuple[list[dict], list[str]]:
@@ -129,7 +144,7 @@ def main() -> None:
         noise=args.profiles,
         detectors=args.detectors,
         seeds=seeds,
-        overrides=_on_street(spec.overrides, args.moving),
+        overrides=_on_street(spec.overrides, args.moving, args.config),
         data_root=data_root(),
     )
     with run_spec(spec, args) as sweep:

@@ -129,6 +129,51 @@ def test_a_person_walking_across_is_flagged_below_the_default_speed() -> None:
     assert first_flagged(table[:, 0]) <= 15
 
 
+def drifting_flags(detector: MovingObjectDetector, objects, frames: int, speed: float, heading_noise: float, seed: int):
+    """Like `flags`, but the odometry integrates a heading that random-walks, `heading_noise` rad per square root
+    of a second, into the pose the frames carry (the views are of the true pose): parked cars seem to turn about
+    the robot."""
+    rng = np.random.default_rng(seed)
+    steps = rng.normal(0.0, heading_noise * np.sqrt(PERIOD), frames)
+    steps[0] = 0.0
+    heading = np.cumsum(steps)
+    path = np.cumsum(speed * PERIOD * np.column_stack([np.cos(heading), np.sin(heading)]), axis=0)
+    table = np.full((frames, len(objects)), -1)
+    for i in range(frames):
+        true_pose = robot_pose(speed * PERIOD * (i + 1))
+        views = [measured(label, true_pose, start, rng) for label, start, _ in objects]
+        odometry = robot_pose(*path[i])
+        odometry[:2, :2] = [[np.cos(heading[i]), -np.sin(heading[i])], [np.sin(heading[i]), np.cos(heading[i])]]
+        kept_out = detector.update(frame(i, odometry, views))
+        table[i, [j for j, v in enumerate(views) if v is not None]] = kept_out
+    return table
+
+
+def test_parked_cars_seen_with_drifting_odometry_are_not_moving_when_the_drift_is_allowed_for() -> None:
+    """Heavy heading noise (0.03 rad per square root of a second, the simulated `heavy` profile's) turns a parked
+    car 30 m off by a metre in a second: with the odometry's noise left out it seems to move, with it not."""
+    rng = np.random.default_rng(5)
+    objects = [
+        ("car", np.array([x, side * rng.uniform(4.0, 15.0), 0.0]), np.zeros(3))
+        for x in np.linspace(25.0, 80.0, 12)
+        for side in (-1, 1)
+    ]
+    heavy = {"odometry_heading_noise": 0.032, "odometry_distance_noise": 0.32}
+    moved_by_drift, allowed = 0, 0
+    for seed in range(4):
+        unaware = drifting_flags(judge_with(min_speed=0.7, odometry_heading_noise=0.0), objects, 40, 8.0, 0.032, seed)
+        aware = drifting_flags(judge_with(min_speed=0.7, **heavy), objects, 40, 8.0, 0.032, seed)
+        moved_by_drift += int((unaware == 1).sum())
+        allowed += int((aware == 1).sum())
+    assert moved_by_drift >= 20
+    assert allowed == 0
+
+
+def judge_with(**changes) -> MovingObjectDetector:
+    """`judge()` with other settings."""
+    return detector(hold_sigmas=MovingObjectsConfig().significance_sigmas, **changes)
+
+
 def test_a_moving_car_among_parked_ones_leaves_them_static() -> None:
     parked = [("car", np.array([x, side * 4.0, 0.0]), np.zeros(3)) for x in (15, 25, 35) for side in (-1, 1)]
     mover = ("car", np.array([30.0, -2.0, 0.0]), np.array([-8.0, 0.0, 0.0]))
@@ -189,7 +234,8 @@ def test_same_input_same_flags() -> None:
 @pytest.mark.parametrize(
     "changes",
     [{"gate_radius": 0}, {"significance_sigmas": -1}, {"min_speed": -0.5}, {"judge_after": 1}, {"max_tracks": 0},
-     {"track_length": 1}, {"max_unseen": float("inf")}, {"unknown": 1}, {"unjudged": "hold"}],
+     {"track_length": 1}, {"max_unseen": float("inf")}, {"unknown": 1}, {"unjudged": "hold"},
+     {"odometry_heading_noise": -0.01}, {"odometry_distance_noise": float("nan")}],
 )  # fmt: skip
 def test_config_ranges_are_validated(changes: dict) -> None:
     with pytest.raises(ValidationError):

@@ -14,7 +14,10 @@ keyframe and no map object.
   takes other objects' views), a fast car's for almost all of it, so a car doing 1 m a frame stays on its track;
   a track not yet judged (below `judge_after` views) predicts with none.
 - Per track, the last `track_length` observations are fitted with a constant velocity by weighted least squares
-  in the ground plane (each observation weighted by its inverse covariance, long along its ray). From
+  in the ground plane (each observation weighted by its inverse covariance, long along its ray, grown by the
+  odometry's error since it was made: `odometry_heading_noise` turns it about the robot by its range times the
+  heading error, `odometry_distance_noise` shifts it; both random walks, so the older a view, the less it weighs
+  and the less a velocity it fixes; else heavy odometry noise makes parked cars 30 m off seem to move). From
   `judge_after` observations on, a track moves when its velocity is `significance_sigmas` stds from zero and at
   least `min_speed`; once moving it stays so (a car waiting at a light is still traffic). The velocity's
   covariance grows by the fit's reduced chi-square where the views scatter beyond their noise, and a view that
@@ -48,10 +51,10 @@ from neoslam.types import Frame, ObjectObservation
 __all__ = ["MovingObjectDetector"]
 
 
-def _information(rays: np.ndarray, along: np.ndarray, across: float) -> np.ndarray:
-    """(n, 2, 2) inverse covariances of ground-plane positions: `along` std on the unit ray, `across` off it."""
+def _stereo_covariance(rays: np.ndarray, along: np.ndarray, across: float) -> np.ndarray:
+    """(n, 2, 2) covariances of ground-plane positions: `along` std on the unit ray, `across` off it."""
     outer = rays[:, :, None] * rays[:, None, :]
-    return outer / along[:, None, None] ** 2 + (np.eye(2) - outer) / across**2
+    return outer * along[:, None, None] ** 2 + (np.eye(2) - outer) * across**2
 
 
 class MovingObjectDetector:
@@ -75,7 +78,10 @@ class MovingObjectDetector:
         self._last_time = np.zeros(slots)
         self._times = np.zeros((slots, length))
         self._points = np.zeros((slots, length, 2))
-        self._info = np.zeros((slots, length, 2, 2))  # zero: an empty entry of the ring
+        self._covariance = np.zeros((slots, length, 2, 2))  # stereo only, odometry's added at the fit
+        self._rays = np.zeros((slots, length, 2))  # unit, from the robot
+        self._ranges = np.zeros((slots, length))  # m, from the robot
+        self._held = np.zeros((slots, length), dtype=bool)  # False: an empty entry of the ring
         # The fit, at the time of the track's last observation: position, velocity as predicted with, Mahalanobis
         # norm of the velocity, speed.
         self._position = np.zeros((slots, 2))
@@ -137,11 +143,12 @@ class MovingObjectDetector:
         in_robot = camera_points_to_robot(centres)
         points = transform_points(frame.odometry_pose, in_robot)[:, :2]
         rays = points - frame.odometry_pose[:2, 3]
-        rays /= np.maximum(np.linalg.norm(rays, axis=1, keepdims=True), 1e-9)
+        ranges = np.linalg.norm(rays, axis=1)
+        rays /= np.maximum(ranges, 1e-9)[:, None]
         sigmas = depth_sigmas(observations, self.object_map)  # as the object map weighs them
         labels = [o.label for o in observations]
         tracks, ambiguous = self._assign(labels, points, rays, sigmas, frame.timestamp)
-        information = _information(rays, sigmas, self.object_map.position_sigma_floor)
+        covariance = _stereo_covariance(rays, sigmas, self.object_map.position_sigma_floor)
         for j, track in enumerate(tracks):
             if track < 0:
                 predecessor = self._predecessor(labels[j], points[j], frame.timestamp, tracks)
@@ -149,7 +156,7 @@ class MovingObjectDetector:
                 self._passed[tracks[j]] = list(self._passed[predecessor]) if predecessor >= 0 else []
             if ambiguous[j]:
                 self._restart_fit(tracks[j])
-            self._append(tracks[j], frame.timestamp, points[j], information[j], in_robot[j], row)
+            self._append(tracks[j], frame.timestamp, points[j], covariance[j], rays[j], ranges[j], in_robot[j], row)
         self._fit(tracks)
         self._judge(tracks)
         unjudged_out = (self._seen[tracks] < self.config.judge_after) & (self.config.unjudged == "out")
@@ -230,14 +237,24 @@ class MovingObjectDetector:
 
     def _restart_fit(self, slot: int) -> None:
         """Forget the track's observations in the fit (not its velocity, which it goes on predicting with)."""
-        self._info[slot] = 0.0
+        self._held[slot] = False
         self._fitted[slot] = 0
 
     def _append(
-        self, slot: int, time: float, point: np.ndarray, information: np.ndarray, view: np.ndarray, row: int
+        self,
+        slot: int,
+        time: float,
+        point: np.ndarray,
+        covariance: np.ndarray,
+        ray: np.ndarray,
+        distance: float,
+        view: np.ndarray,
+        row: int,
     ) -> None:
         entry = self._seen[slot] % self.config.track_length  # a ring: the oldest observation leaves
-        self._times[slot, entry], self._points[slot, entry], self._info[slot, entry] = time, point, information
+        self._times[slot, entry], self._points[slot, entry] = time, point
+        self._covariance[slot, entry], self._rays[slot, entry], self._ranges[slot, entry] = covariance, ray, distance
+        self._held[slot, entry] = True
         self._seen[slot] += 1
         self._fitted[slot] = min(self._fitted[slot] + 1, self.config.track_length)
         self._last_time[slot], self._last_view[slot], self._last_row[slot] = time, view, row
@@ -257,7 +274,7 @@ class MovingObjectDetector:
         tau = self._times[slots] - self._last_time[slots, None]
         origin = self._points[slots, last[slots]]
         points = self._points[slots] - origin[:, None]
-        info = self._info[slots]
+        info = self._information(slots, -tau)
         normal = np.zeros((len(slots), 4, 4))
         normal[:, :2, :2] = info.sum(axis=1)
         normal[:, :2, 2:] = np.einsum("sl,slij->sij", tau, info)
@@ -287,6 +304,25 @@ class MovingObjectDetector:
         self._velocity[slots] = shrink * bounded * velocity
         self._significance[slots], self._speed[slots] = significance, speed
         self._speed_bound[slots] = speed + self.config.static_sigmas * widest
+
+    def _information(self, slots: np.ndarray, age: np.ndarray) -> np.ndarray:
+        """(s, l, 2, 2) inverse covariances of the tracks' observations relative to their last one, `age` s before
+        it: stereo noise, and the odometry's since (a heading random walk turns a view about the robot, by its range
+        times the heading error; the distance error shifts it), taken as independent per observation (the shared
+        part of two views' odometry errors is left out). Zero for empty entries of the ring."""
+        config = self.config
+        rays = self._rays[slots]
+        across = np.stack([-rays[..., 1], rays[..., 0]], axis=-1)
+        turned = (config.odometry_heading_noise * self._ranges[slots]) ** 2 * age
+        moved = config.odometry_distance_noise**2 * age
+        covariance = (
+            self._covariance[slots]
+            + turned[..., None, None] * across[..., :, None] * across[..., None, :]
+            + moved[..., None, None] * np.eye(2)
+        )
+        held = self._held[slots]
+        covariance[~held] = np.eye(2)  # any invertible matrix: the entry is zeroed below
+        return np.linalg.inv(covariance) * held[..., None, None]
 
     def _judge(self, slots: np.ndarray) -> None:
         """Tracks old enough to judge whose velocity is significant and fast enough move from now on."""
