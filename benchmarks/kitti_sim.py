@@ -17,8 +17,9 @@ sweep folder, and running again resumes it. Timing columns are per run.
 
 `--detectors`: the simulator's detection profiles (default: real, the street and detector calibrated to the real
 front end on KITTI 06, and ideal, the richer street of the first benchmarks). `--moving`: share of moving objects
-(default 0.2, the issue's setting; 0 gives static streets). `--config`: config values put under every run (over
-the steps' own), e.g. `benchmarks/specs/heavy_odometry.yaml`, the motion detector told how noisy `heavy` odometry is.
+(default 0.2, the issue's setting; 0 gives static streets). `--config`: the spec's `config`, a config file under
+every run (the steps' overrides over it), e.g. `benchmarks/specs/heavy_odometry.yaml`, the motion detector told how
+noisy `heavy` odometry is.
 """
 
 from __future__ import annotations
@@ -30,7 +31,6 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
 from _sweep import SPECS, run_spec, sweep_options, with_changes  # noqa: E402
-from neoslam.config import load_config  # noqa: E402
 from neoslam.sim.profiles import DETECTION_PROFILES  # noqa: E402
 from neoslam.sweep import load_spec  # noqa: E402
 
@@ -53,21 +53,10 @@ def _arguments(parser) -> None:
     sweep_options(parser)
 
 
-def _on_street(overrides: dict, moving: float, config: Path | None) -> dict:
-    """Every override simulates the same street, with a share `moving` of its objects moving, and takes the values
-    of the config file."""
-    common = load_config(config, environ={}).model_dump(exclude_unset=True) if config else {}
-    common = _merged(common, {"simulator": {"world": {"moving_fraction": moving}}})
-    return {name: _merged(values, common) for name, values in overrides.items()}
-
-
-def _merged(base: dict, extra: dict) -> dict:
-    """`base` with the values of `extra`, section by section."""
-    merged = dict(base)
-    for key, value in extra.items():
-        inner = merged.get(key)
-        merged[key] = _merged(inner, value) if isinstance(inner, dict) and isinstance(value, dict) else value
-    return merged
+def _on_street(overrides: dict, moving: float) -> dict:
+    """Every override simulates the same street, with a share `moving` of its objects moving."""
+    street = {"simulator": {"world": {"moving_fraction": moving}}}
+    return {name: values | street for name, values in overrides.items()}
 
 
 def _drives(records) -> tuple[list[dict], list[str]]:
@@ -144,8 +133,9 @@ def main() -> None:
         noise=args.profiles,
         detectors=args.detectors,
         seeds=seeds,
-        overrides=_on_street(spec.overrides, args.moving, args.config),
+        overrides=_on_street(spec.overrides, args.moving),
         data_root=data_root(),
+        **({"config": args.config.resolve()} if args.config else {}),
     )
     with run_spec(spec, args) as sweep:
         rows, errors = _drives(sweep.records)
