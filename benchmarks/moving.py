@@ -11,7 +11,9 @@ moving when its speed is > 0):
   keyframe (flagged moving, or fused into a window object the keyframe does not hold);
 - `moving_not_known`: the share not in that keyframe as an object known to be static (out of it, or in it as a
   provisional object, which is no contradiction to a match when missing: `moving_objects.unjudged: wait`);
-- `static_flagged`: the share of all detections of static objects that the detector kept out as moving.
+- `static_flagged`: the share of all detections of static objects that the detector kept out as moving;
+- `heading_noise`, `distance_noise`: the odometry noise its tracks allowed for at the end of the drive (rad and m
+  per square root of a second: the stated floor, or the online estimate where larger).
 Ground truth is read here for judging only; NeoSLAM sees the frames.
 
 The `oracle` rows are the reference a detector aims at: the same drive with the moving objects' detections removed
@@ -171,6 +173,8 @@ def run_drive(job: dict) -> dict:
         "moving_kept_out": _share(kept_out, moving_at_keyframes),
         "moving_not_known": _share(kept_out + kept_provisional, moving_at_keyframes),
         "static_flagged": float(np.mean(~passed[static])) if static.any() else float("nan"),
+        "heading_noise": slam.moving_objects.odometry_noise()[0],
+        "distance_noise": slam.moving_objects.odometry_noise()[1],
     }
 
 
@@ -199,7 +203,7 @@ def main() -> None:
     )
     columns = ["sequence", "seed", "moving_fraction", "detector", "loop_precision", "loop_recall", "closures",
                "ate_corrected_m", "objects", "moving_reported", "moving_at_keyframes", "moving_kept_out",
-               "moving_not_known", "static_flagged"]  # fmt: skip
+               "moving_not_known", "static_flagged", "heading_noise", "distance_noise"]  # fmt: skip
     print(markdown_table(rows, columns))
     write_json(args.json, {"profile": args.profile, "detector": args.detector, "frames": frames, "rows": rows})
 

@@ -146,6 +146,8 @@ def test_metrics_json_keys(workspace: Path) -> None:
     assert isinstance(loops["accepted"], int)
     assert loops["accepted"] == loops["true_positive"] + loops["false_positive"]
     assert metrics["timing"]["wall_s"] > 0 and metrics["timing"]["fps"] > 0
+    noise = metrics["odometry_noise"]  # the stated floor at least
+    assert noise["heading_rad_per_sqrt_s"] >= 0.0032 and noise["distance_m_per_sqrt_s"] >= 0.063
 
 
 def test_ate_equals_evo(workspace: Path) -> None:

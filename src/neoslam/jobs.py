@@ -234,6 +234,8 @@ def _metrics(dataset: Dataset, result: RunResult, config: NeoSLAMConfig, wall_s:
     metrics["objects"] = len(result.objects)
     metrics["moving_objects"] = len(result.moving_objects)
     metrics["moving_observations"] = result.moving_observations
+    heading, distance = result.odometry_noise
+    metrics["odometry_noise"] = {"heading_rad_per_sqrt_s": heading, "distance_m_per_sqrt_s": distance}
     metrics["cells"] = cell_metrics(result.cell_states, result.odometry, result.object_vector_cells)
     metrics["timing"] = timing_metrics(result.frame_times_s, wall_s)
     metrics["timing"]["backend_s"] = experience_map.backend.seconds  # in the pose-graph solvers, summed

@@ -63,6 +63,8 @@ class RunResult:
     first_keyframe: int = 0  # keyframes with lower ids are a stored map's (earlier sessions')
     moving_objects: list[MapObject] = field(default_factory=list)  # where each moving object was last seen
     moving_observations: int = 0  # observations kept out of keyframes and the map as moving
+    # the odometry's heading and position noise the motion detector allowed for at the end, rad and m per root second
+    odometry_noise: tuple[float, float] = (0.0, 0.0)
 
     def closure_sessions(self) -> list[tuple[int, int]]:
         """Per loop closure, this session and the session of the keyframe it recognised."""
@@ -329,6 +331,7 @@ class NeoSLAM:
             first_keyframe=self.keyframes.first_id,
             moving_objects=self.moving_objects.objects(estimate.poses),
             moving_observations=self.moving_objects.flagged,
+            odometry_noise=self.moving_objects.odometry_noise(),
         )
 
 

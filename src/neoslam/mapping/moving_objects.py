@@ -17,9 +17,11 @@ keyframe and no map object.
   in the ground plane (each observation weighted by its inverse covariance, long along its ray, grown by the
   odometry's error since it was made: `odometry_heading_noise` turns it about the robot by its range times the
   heading error, `odometry_distance_noise` shifts it; both random walks, so the older a view, the less it weighs
-  and the less a velocity it fixes; else heavy odometry noise makes parked cars 30 m off seem to move). From
-  `judge_after` observations on, a track moves when its velocity is `significance_sigmas` stds from zero and at
-  least `min_speed`; once moving it stays so (a car waiting at a light is still traffic). The velocity's
+  and the less a velocity it fixes; else heavy odometry noise makes parked cars 30 m off seem to move). With
+  `odometry_noise: estimated` those two are floors, raised by the estimate of mapping/odometry_noise.py from how
+  slow tracks' views drift. From `judge_after` observations on, a track moves when its velocity is
+  `significance_sigmas` stds from zero and at least `min_speed` (`label_min_speed` for walkers); once moving it
+  stays so (a car waiting at a light is still traffic). The velocity's
   covariance grows by the fit's reduced chi-square where the views scatter beyond their noise, and a view that
   falls in two tracks' gates restarts its track's fit (far views of objects in a row can swap tracks, which then
   seem to move).
@@ -46,6 +48,7 @@ from neoslam.geometry import transform_points
 from neoslam.io.frames import camera_points_to_robot
 from neoslam.loop.keyframes import LocalObjectWindow, object_centres
 from neoslam.mapping.object_map import MapObject, depth_sigmas
+from neoslam.mapping.odometry_noise import OdometryNoiseEstimate
 from neoslam.types import Frame, ObjectObservation
 
 __all__ = ["MovingObjectDetector"]
@@ -73,6 +76,7 @@ class MovingObjectDetector:
         self._labels: list[str | None] = [None] * slots
         self._live = np.zeros(slots, dtype=bool)
         self._moving = np.zeros(slots, dtype=bool)
+        self._min_speed = np.full(slots, config.min_speed)  # the track's label's
         self._seen = np.zeros(slots, dtype=int)  # observations ever joined
         self._fitted = np.zeros(slots, dtype=int)  # observations in the fit (since the last ambiguous one)
         self._last_time = np.zeros(slots)
@@ -82,6 +86,7 @@ class MovingObjectDetector:
         self._rays = np.zeros((slots, length, 2))  # unit, from the robot
         self._ranges = np.zeros((slots, length))  # m, from the robot
         self._held = np.zeros((slots, length), dtype=bool)  # False: an empty entry of the ring
+        self._rows = np.zeros((slots, length), dtype=int)  # the frame (count of frames given) of each entry
         # The fit, at the time of the track's last observation: position, velocity as predicted with, Mahalanobis
         # norm of the velocity, speed.
         self._position = np.zeros((slots, 2))
@@ -99,6 +104,7 @@ class MovingObjectDetector:
         self._frames = 0
         self.flagged = 0  # observations kept out as moving (or held while undecided)
         self.retracted = 0  # views let through earlier, taken back out of the keyframe window
+        self.noise_estimate = OdometryNoiseEstimate(config.noise_window, config.noise_min_views, config.noise_bins)
 
     def static(self, frame: Frame, window: LocalObjectWindow | None = None) -> tuple[ObjectObservation, ...]:
         """The frame's observations of objects not judged moving (all of them when disabled). The views of a track
@@ -149,6 +155,8 @@ class MovingObjectDetector:
         labels = [o.label for o in observations]
         tracks, ambiguous = self._assign(labels, points, rays, sigmas, frame.timestamp)
         covariance = _stereo_covariance(rays, sigmas, self.object_map.position_sigma_floor)
+        if self.config.odometry_noise == "estimated":
+            self._observe_odometry_error(tracks, ambiguous, points, rays, ranges, row, frame.timestamp)
         for j, track in enumerate(tracks):
             if track < 0:
                 predecessor = self._predecessor(labels[j], points[j], frame.timestamp, tracks)
@@ -167,14 +175,14 @@ class MovingObjectDetector:
         ahead coming on moves its few views mostly along the viewing ray, where stereo depth is least sure, so three
         views of it are not moving enough to be judged so, yet not enough to know it parked either."""
         judged = self._seen[slots] >= self.config.judge_after
-        return judged & ~self._moving[slots] & (self._speed_bound[slots] < self.config.min_speed)
+        return judged & ~self._moving[slots] & (self._speed_bound[slots] < self._min_speed[slots])
 
     def _suspect(self, slots: np.ndarray) -> np.ndarray:
         """Tracks not (yet) judged moving whose velocity is `hold_sigmas` stds from zero and fast enough: a car
         still far and noisy; its views are held out until the evidence is in (a view let into a keyframe stays
         in its window for window_length metres)."""
         config = self.config
-        fast = self._speed[slots] >= config.min_speed
+        fast = self._speed[slots] >= self._min_speed[slots]
         return ~self._moving[slots] & fast & (self._significance[slots] >= config.hold_sigmas)
 
     def _assign(
@@ -227,6 +235,7 @@ class MovingObjectDetector:
         if self._live[slot]:
             self._end(np.array([slot]))
         self._labels[slot] = label
+        self._min_speed[slot] = self.config.label_min_speed.get(label, self.config.min_speed)
         self._live[slot], self._moving[slot], self._seen[slot] = True, False, 0
         self._restart_fit(slot)
         self._velocity[slot], self._significance[slot], self._speed[slot] = 0.0, 0.0, 0.0
@@ -258,6 +267,52 @@ class MovingObjectDetector:
         self._seen[slot] += 1
         self._fitted[slot] = min(self._fitted[slot] + 1, self.config.track_length)
         self._last_time[slot], self._last_view[slot], self._last_row[slot] = time, view, row
+        self._rows[slot, entry] = row
+
+    def _observe_odometry_error(
+        self, tracks: np.ndarray, ambiguous: np.ndarray, points: np.ndarray, rays: np.ndarray, ranges: np.ndarray,
+        row: int, time: float,
+    ) -> None:  # fmt: skip
+        """For the noise estimate, the displacements across the line from the robot of this frame's views of tracks
+        slower than `noise_max_speed`: over a long interval, from the track's latest view at least `noise_lag`
+        frames old, and over the intervals at its ends, to the view after that one and from the track's last view.
+        Not only tracks not found moving: under heavy odometry noise those are the near ones, and the far parked
+        cars the heading error moves most would be left out."""
+        usable = np.flatnonzero((tracks >= 0) & ~ambiguous)
+        usable = usable[self._speed[tracks[usable]] < self.config.noise_max_speed]
+        slots = tracks[usable]
+        rows = np.where(self._held[slots], self._rows[slots], -1)
+        old = np.where(rows <= row - self.config.noise_lag, rows, -1)
+        first = old.argmax(axis=1)  # the latest view old enough
+        later = np.where(rows > old.max(axis=1, keepdims=True), rows, np.iinfo(int).max)
+        after, last = later.argmin(axis=1), rows.argmax(axis=1)  # the view after that one, and the latest
+        # a view old enough, and two more after it (else the two short intervals would be one)
+        keep = (old.max(axis=1) >= 0) & (later.min(axis=1) < rows.max(axis=1))
+        if not keep.any():
+            return
+        slots, views, entries = slots[keep], usable[keep], [first[keep], after[keep], last[keep]]
+        at = [self._points[slots, e] for e in entries] + [points[views]]
+        robot_then = at[0] - self._rays[slots, entries[0]] * self._ranges[slots, entries[0], None]
+        arms = at[3] - (robot_then + points[views] - rays[views] * ranges[views, None]) / 2.0
+        lengths = np.linalg.norm(arms, axis=1)
+        across = np.stack([-arms[:, 1], arms[:, 0]], axis=1) / np.maximum(lengths, 1e-9)[:, None]
+        times = [self._times[slots, e] for e in entries] + [np.full(len(slots), time)]
+        longer = (times[3] - times[0]) - ((times[1] - times[0]) + (times[3] - times[2])) / 2.0
+
+        def displacement(start: int, end: int) -> np.ndarray:
+            return np.einsum("ni,ni->n", at[end] - at[start], across)
+
+        self.noise_estimate.add(lengths, displacement(0, 3), displacement(0, 1), displacement(2, 3), longer)
+
+    def odometry_noise(self) -> tuple[float, float]:
+        """The heading (rad) and distance (m) random walks per square root of a second the tracks allow for: as
+        stated, or the online estimate where it is larger (`odometry_noise: estimated`)."""
+        config = self.config
+        stated = config.odometry_heading_noise, config.odometry_distance_noise
+        estimate = self.noise_estimate.noise() if config.odometry_noise == "estimated" else None
+        if estimate is None:
+            return stated
+        return max(stated[0], estimate[0]), max(stated[1], estimate[1])
 
     def _fit(self, slots: np.ndarray) -> None:
         """Constant-velocity weighted least squares of each track's observations, relative to its last one (time
@@ -310,11 +365,11 @@ class MovingObjectDetector:
         it: stereo noise, and the odometry's since (a heading random walk turns a view about the robot, by its range
         times the heading error; the distance error shifts it), taken as independent per observation (the shared
         part of two views' odometry errors is left out). Zero for empty entries of the ring."""
-        config = self.config
+        heading_noise, distance_noise = self.odometry_noise()
         rays = self._rays[slots]
         across = np.stack([-rays[..., 1], rays[..., 0]], axis=-1)
-        turned = (config.odometry_heading_noise * self._ranges[slots]) ** 2 * age
-        moved = config.odometry_distance_noise**2 * age
+        turned = (heading_noise * self._ranges[slots]) ** 2 * age
+        moved = distance_noise**2 * age
         covariance = (
             self._covariance[slots]
             + turned[..., None, None] * across[..., :, None] * across[..., None, :]
@@ -331,7 +386,7 @@ class MovingObjectDetector:
         moves = (
             judged
             & (self._significance[slots] >= config.significance_sigmas)
-            & (self._speed[slots] >= config.min_speed)
+            & (self._speed[slots] >= self._min_speed[slots])
         )
         for slot in slots[moves & ~self._moving[slots]]:
             self._moving[slot], self._moving_id[slot] = True, self._next_moving_id
