@@ -56,6 +56,14 @@ def test_no_estimate_before_enough_views_and_the_window_keeps_the_latest() -> No
     assert heading < 0.005 and distance < 0.06
 
 
+def test_few_views_or_intervals_of_no_time_give_no_noise_and_no_error() -> None:
+    estimate = OdometryNoiseEstimate(window=10, min_views=1, bins=4)
+    estimate.add(np.array([10.0]), np.array([1.0]), np.array([0.1]), np.array([0.1]), np.array([0.9]))
+    assert estimate.noise() == (0.0, 0.0)  # one view: one group, no line
+    estimate.add(np.full(5, 20.0), np.ones(5), np.zeros(5), np.zeros(5), np.zeros(5))
+    assert estimate.noise() == (0.0, 0.0)  # only one group spans any time
+
+
 def test_the_line_fit_keeps_both_terms_non_negative() -> None:
     x = np.array([1.0, 2.0, 3.0, 4.0])
     assert _non_negative_line(x, 2.0 * x + 1.0) == pytest.approx((2.0, 1.0))

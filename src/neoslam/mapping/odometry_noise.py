@@ -68,11 +68,15 @@ class OdometryNoiseEstimate:
     def _estimate(self) -> tuple[float, float]:
         held = np.array(self._held)
         held = held[np.argsort(held[:, 0], kind="stable")]
-        groups = np.array_split(held, self.bins)
+        groups = np.array_split(held, min(self.bins, len(held)))
         arm = np.array([np.median(g[:, 0]) for g in groups])
         long = np.array([np.median(g[:, 1]) / _MEDIAN_CHI2_1 for g in groups])
         short = np.array([2.0 * np.median(g[:, 2]) / _MEDIAN_CHI2_2 for g in groups])
         longer = np.array([np.median(g[:, 3]) for g in groups])
+        timed = longer > 0  # frames with one timestamp make intervals of none: they tell no growth
+        if np.count_nonzero(timed) < 2:
+            return 0.0, 0.0
+        arm, long, short, longer = arm[timed], long[timed], short[timed], longer[timed]
         growth = (long - short) / longer
         # A median's error is in proportion to the spread it measures: the near groups fix the position's term.
         weights = longer / np.maximum(long, np.finfo(float).tiny)
