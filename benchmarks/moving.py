@@ -153,6 +153,7 @@ def run_drive(job: dict) -> dict:
             kept_out += len(held) == 0
             kept_provisional += len(held) > 0 and bool(keyframe.provisional[held[0]])
     result = slam.result(np.zeros(len(dataset)))
+    heading_noise, distance_noise = result.odometry_noise
     truth = dataset.ground_truth
     loops = loop_metrics(result.session_closures(), truth, config.evaluation, result.keyframe_frames)
     static = real & ~moving
@@ -173,8 +174,8 @@ def run_drive(job: dict) -> dict:
         "moving_kept_out": _share(kept_out, moving_at_keyframes),
         "moving_not_known": _share(kept_out + kept_provisional, moving_at_keyframes),
         "static_flagged": float(np.mean(~passed[static])) if static.any() else float("nan"),
-        "heading_noise": slam.moving_objects.odometry_noise()[0],
-        "distance_noise": slam.moving_objects.odometry_noise()[1],
+        "heading_noise": heading_noise,
+        "distance_noise": distance_noise,
     }
 
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 from collections import deque
 
 import numpy as np
+from scipy.optimize import nnls
 
 __all__ = ["OdometryNoiseEstimate"]
 
@@ -89,13 +90,5 @@ def _non_negative_line(x: np.ndarray, y: np.ndarray, weights: np.ndarray | None 
     """Slope and intercept, both at least 0, of the line y = slope x + intercept by least squares, each point's
     residual times its weight (default 1)."""
     weights = np.ones_like(x) if weights is None else weights
-    wx, wy = weights * x, weights * y
-    slope, intercept = np.linalg.lstsq(np.column_stack([wx, weights]), wy, rcond=None)[0]
-    if slope >= 0 and intercept >= 0:
-        return float(slope), float(intercept)
-    through_origin = max(0.0, float(wx @ wy / (wx @ wx))) if wx @ wx > 0 else 0.0
-    level = max(0.0, float(weights @ wy / (weights @ weights)))
-    # the better of the two one-parameter fits
-    if np.sum((wy - through_origin * wx) ** 2) <= np.sum((wy - level * weights) ** 2):
-        return through_origin, 0.0
-    return 0.0, level
+    (slope, intercept), _ = nnls(np.column_stack([weights * x, weights]), weights * y)
+    return float(slope), float(intercept)
