@@ -9,7 +9,8 @@ accepted closures; `landmarks`: objects as landmarks in iSAM2), and the three to
 but for landmarks when they are off by default). Loop closures are judged within 5 m horizontally, 100 frames
 apart. The runs are one sweep, `benchmarks/specs/kitti_sim.yaml` (`neoslam sweep`; a drive's runs share its
 simulation): on a local pool, one worker per core, or on a Ray cluster (`--ray ADDRESS`); `--out DIR` keeps the
-sweep folder, and running again resumes it. Timing columns are per run.
+sweep folder, and running again resumes it. Beside ATE, the translation RPE over 100 m of route
+(the evaluation's `rpe_delta`) per step. Timing columns are per run.
 
     python benchmarks/kitti_sim.py [--quick] [--json FILE] [--sequences 05 08] [--profiles vo] [--seeds 1 2 3]
                                    [--detectors real ideal] [--moving 0.2] [--config FILE.yaml] [--out DIR]
@@ -89,6 +90,9 @@ def row(sequence: str, detector: str, profile: str, seed: int, metrics: dict[str
     }
     for step in STEPS:
         figures[f"ate_{step}_m"] = metrics[step]["ate_rmse_m"]["corrected"]
+    figures["rpe_odometry_m"] = _rpe(baseline, "odometry")
+    for step in ("relaxation", *STEPS):
+        figures[f"rpe_{step}_m"] = _rpe(metrics[step], "corrected")
     for step in ("baseline", "moving", "all"):
         loops = metrics[step]["loops"]
         figures |= {
@@ -109,6 +113,12 @@ def row(sequence: str, detector: str, profile: str, seed: int, metrics: dict[str
         "backend_s_baseline": baseline["timing"].get("backend_s"),
         "backend_s_landmarks": metrics["landmarks"]["timing"].get("backend_s"),
     }
+
+
+def _rpe(metrics: dict, trajectory: str) -> float | None:
+    """Translation RPE RMSE over the evaluation's spacing (100 m): how well a step keeps the map locally right,
+    which ATE over a whole drive hides when one stretch is off."""
+    return metrics["trajectory"][trajectory]["rpe_translation_rmse_m"]
 
 
 def _medians(rows: list[dict], keys: list[str]) -> list[dict]:
@@ -147,17 +157,20 @@ def main() -> None:
     print(f"Streets with {args.moving:.0%} of their objects moving. Corrected ATE RMSE (m, SE(3)-aligned):\n")
     ate = ["ate_odometry_m", "ate_relaxation_m", *(f"ate_{step}_m" for step in STEPS)]
     print(markdown_table(rows, ["sequence", "detector", "profile", "seed", "frames", *ate]))
+    rpe = ["rpe_odometry_m", "rpe_relaxation_m", *(f"rpe_{step}_m" for step in STEPS)]
+    print("\nTranslation RPE RMSE over 100 m of route (m):\n")
+    print(markdown_table(rows, ["sequence", "detector", "profile", "seed", *rpe]))
     loops = [f"{kind}_{step}" for step in ("baseline", "moving", "all") for kind in ("loops", "false", "recall")]
     print("\nLoop closures (accepted, false, recall), map objects and speed:\n")
     speed = ["objects_baseline", "objects_all", "fps_baseline", "fps_landmarks", "fps_all", "ms_per_frame_p95_all",
              "backend_s_baseline", "backend_s_landmarks"]  # fmt: skip
     print(markdown_table(rows, ["sequence", "detector", "profile", "seed", *loops, *speed]))
     if len(seeds) > 1:
-        keys = [*ate, *loops, *speed]
+        keys = [*ate, *rpe, *loops, *speed]
         print("\nMedian over seeds:\n")
         print(markdown_table(_medians(rows, keys), ["sequence", "detector", "profile", "seeds", *keys]))
     print("\n" + summary.replace("# Sweep", "Sweep", 1))
-    write_json(args.json, {"moving_fraction": args.moving, "rows": rows, "medians": _medians(rows, ate)})
+    write_json(args.json, {"moving_fraction": args.moving, "rows": rows, "medians": _medians(rows, [*ate, *rpe])})
 
 
 if __name__ == "__main__":

@@ -267,3 +267,28 @@ def test_truth_of_the_wrong_length(dataset: Path) -> None:
     path = dataset / "truth" / "poses_tum.txt"
     path.write_text("".join(path.read_text().splitlines(True)[:-1]))
     assert _error(dataset).path == path
+
+
+def test_dataset_name_that_is_a_number(dataset: Path) -> None:
+    path = dataset / "dataset.yaml"
+    lines = [line for line in path.read_text().splitlines(True) if not line.startswith("name:")]
+    path.write_text("".join(lines) + "name: 5\n")
+    assert read_dataset(dataset).name == "5"
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "{a: 1}",
+        "x" * 300,
+        # An alias chain: 2 KB of YAML that expands to gigabytes once written into metrics.json.
+        "&a [lol, lol, lol]\nb: &b [*a, *a, *a]\nc: [*b, *b, *b]",
+    ],
+)
+def test_dataset_name_that_is_no_name(dataset: Path, name: str) -> None:
+    path = dataset / "dataset.yaml"
+    lines = [line for line in path.read_text().splitlines(True) if not line.startswith("name:")]
+    path.write_text("".join(lines) + f"name: {name}\n")
+    error = _error(dataset)
+    assert error.path == path
+    assert "name must be a string" in error.problem

@@ -13,6 +13,7 @@ from neoslam.perception.detection import Detection
 from neoslam.perception.detections_file import DetectionsFile, write_detections_file
 
 CLASSES = ["car", "truck", "bicycle", "person"]
+HUGE = "9" * 400  # an integer literal beyond any float
 GOOD = {"label": "car", "score": 0.9, "box": [10.0, 20.0, 110.0, 80.0]}
 
 
@@ -97,6 +98,9 @@ def test_extra_keys_are_ignored(tmp_path: Path) -> None:
         ('{"frame": 0, "detections": [{"label": "car", "score": NaN, "box": [0, 0, 1, 1]}]}', "score"),
         ('{"frame": 0, "detections": [{"label": "car", "score": 0.5, "box": [0, 0, Infinity, 1]}]}', "4 finite"),
         ('{"frame": 0, "detections": [{"label": "car", "score": 0.5, "box": [NaN, 0, 1, 1]}]}', "4 finite"),
+        # Integer literals beyond any float: JSON reads them as Python ints, which overflow on conversion.
+        ('{"frame": 0, "detections": [{"label": "car", "score": ' + HUGE + ', "box": [0, 0, 1, 1]}]}', "score"),
+        ('{"frame": 0, "detections": [{"label": "car", "score": 0.5, "box": [0, 0, ' + HUGE + ", 1]}]}", "4 finite"),
         (_line(box=[0, 0, 1]), "4 finite numbers"),
         (_line(box=[0, 0, 1, "2"]), "4 finite numbers"),
         (_line(box="0 0 1 1"), "4 finite numbers"),

@@ -40,6 +40,8 @@ VERSION = 1
 FRAME_COLUMNS = ("frame", "timestamp", "vx", "vy", "vz", "wx", "wy", "wz")
 BOX_COLUMNS = tuple(f"{side}_{c}" for side in ("left", "right") for c in ("x1", "y1", "x2", "y2"))
 DETECTION_COLUMNS = ("frame", "label", "score", *BOX_COLUMNS, "x", "y", "z")
+# A dataset's name is copied into every output; longer is no name but a corrupt or hostile file.
+MAX_NAME_CHARS = 256
 NPY_MAGIC = b"\x93NUMPY"
 ZIP_MAGIC = b"PK\x03\x04"
 OBJECT_COLUMNS = ("id", "label", "x", "y", "z", "length", "width", "height", "yaw", "vx", "vy", "vz")
@@ -151,6 +153,13 @@ def _read_meta(path: Path) -> dict:
     frames = meta["frames"]
     if not isinstance(frames, int) or isinstance(frames, bool) or frames < 1:
         raise InputError(path, f"frames must be the number of frames in frames.csv (an integer >= 1), got {frames!r}")
+    name = meta.get("name", path.parent.name)
+    if isinstance(name, int | float):  # `name: 05` is YAML's number 5: a name all the same
+        name = str(name)
+    if not isinstance(name, str) or len(name) > MAX_NAME_CHARS:
+        # A name is copied into every output (metrics.json, maps): a YAML alias chain here once made 2.8 GB of it.
+        raise InputError(path, f"name must be a string of at most {MAX_NAME_CHARS} characters")
+    meta["name"] = name
     try:
         meta["camera"] = CameraConfig.model_validate(meta.get("camera", {}))
     except ValidationError as error:
@@ -264,6 +273,4 @@ def read_dataset(folder: Path, limits: MotionLimitsConfig | None = None) -> Simu
     truth = read_tum(truth_file) if truth_file.is_file() else None
     if truth is not None and len(truth) != len(stamps):
         raise InputError(truth_file, f"{len(truth)} poses for {len(stamps)} frames")
-    return SimulatedDataset(
-        folder, str(meta.get("name", folder.name)), meta["camera"], stamps, linear, angular, observations, truth, rows
-    )
+    return SimulatedDataset(folder, meta["name"], meta["camera"], stamps, linear, angular, observations, truth, rows)

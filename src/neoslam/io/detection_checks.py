@@ -30,7 +30,12 @@ MAX_CENTRE_M = 1e4
 
 def is_number(value: Any) -> bool:
     """A finite int or float; JSON's true/false are not numbers, nor are NaN and Infinity (json.loads reads them)."""
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+    if not isinstance(value, int | float) or isinstance(value, bool):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # an integer literal beyond any float (JSON allows 400 digits)
+        return False
 
 
 def label_problem(label: Any) -> str | None:
