@@ -108,6 +108,12 @@ def test_unknown_environment_field_is_an_error() -> None:
         load_config(environ={"NEOSLAM_MATCHING__BOGUS": "1"})
 
 
+def test_environment_field_set_both_as_a_value_and_as_a_section() -> None:
+    environ = {"NEOSLAM_KEYFRAMES__SPACING": "5", "NEOSLAM_KEYFRAMES__SPACING__X": "1"}
+    with pytest.raises(ConfigError, match="NEOSLAM_KEYFRAMES__SPACING__X: spacing is set as a value"):
+        load_config(environ=environ)
+
+
 def test_environment_value_that_is_not_yaml_is_a_config_error() -> None:
     with pytest.raises(NeoSLAMError, match="MIN_INLIERS|min_inliers"):
         load_config(environ={"NEOSLAM_MATCHING__MIN_INLIERS": "["})

@@ -1035,6 +1035,8 @@ def _env_overrides(environ: dict[str, str]) -> dict[str, Any]:
         node = overrides
         for part in path[:-1]:
             node = node.setdefault(part, {})
+            if not isinstance(node, dict):  # NEOSLAM_A__B=1 and NEOSLAM_A__B__C=2: B cannot be both
+                raise ConfigError(f"environment variable {key}: {part} is set as a value by another variable")
         node[path[-1]] = _parse_scalar(raw)
     return overrides
 

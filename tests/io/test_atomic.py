@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import os
+import shutil
+import signal
 from pathlib import Path
 
 import pytest
 
 from neoslam.errors import OutputError
+from neoslam.io import atomic
 from neoslam.io.atomic import atomic_directory
 
 
@@ -79,3 +83,18 @@ def test_failure_with_overwrite_keeps_the_old_folder(tmp_path: Path) -> None:
         raise KeyboardInterrupt
     assert sorted(p.name for p in target.iterdir()) == ["old.txt"]
     assert _leftovers(tmp_path) == []
+
+
+def test_a_second_interrupt_during_clean_up_waits_for_it(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A second Ctrl-C while the first one's clean-up removes the staging folder: the folder still goes."""
+    remove = shutil.rmtree
+
+    def interrupted_rmtree(path, **options) -> None:
+        os.kill(os.getpid(), signal.SIGINT)  # Python runs the handler at the next bytecode: inside the removal
+        remove(path, **options)
+
+    with pytest.raises(KeyboardInterrupt), atomic_directory(tmp_path / "out") as staging:
+        (staging / "part.txt").write_text("half")
+        monkeypatch.setattr(atomic.shutil, "rmtree", interrupted_rmtree)  # the clean-up's removal, not the set-up's
+        raise KeyboardInterrupt
+    assert list(tmp_path.iterdir()) == []

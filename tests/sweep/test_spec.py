@@ -68,6 +68,7 @@ def test_good_spec_reads(tmp_path: Path) -> None:
         ("name: x\nsources: [{route: block, frames: 0}]\n", "sources[0].frames: Input should be greater than 1"),
         ("- a\n- b\n", "a sweep spec must be a mapping"),
         ("name: [x\n", "line 2: not valid YAML"),
+        ("name: x\nsources: " + "[" * 50000 + "]" * 50000 + "\n", "not valid YAML (nested too deeply)"),
     ],
 )
 def test_spec_mistakes_are_one_line(tmp_path: Path, text: str, expected: str) -> None:

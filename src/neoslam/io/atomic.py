@@ -13,6 +13,8 @@ from __future__ import annotations
 import errno
 import os
 import shutil
+import signal
+import threading
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
@@ -22,6 +24,28 @@ from neoslam.errors import OutputError
 __all__ = ["check_target", "check_target_file", "atomic_directory", "atomic_file"]
 
 _PARTIAL = ".partial-"
+# Signals a user stops a run with: one arriving while a folder is published or cleaned up waits until that is done.
+_STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+
+@contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """Hold stop signals back while the body runs, then deliver the first one that came to the handler it would have
+    met: a second Ctrl-C during the clean-up of the first must not leave a half-removed staging folder. Only the main
+    thread can set handlers; elsewhere the body runs as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    arrived: list[int] = []
+    held = [number for number in _STOP_SIGNALS if signal.getsignal(number) is not None]  # None: set outside Python
+    previous = {number: signal.signal(number, lambda number, _: arrived.append(number)) for number in held}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+        if arrived:
+            signal.raise_signal(arrived[0])
 
 
 def _refuse_link(target: Path) -> None:
@@ -167,10 +191,12 @@ def atomic_directory(target: Path, overwrite: bool = False, inputs: Iterable[Pat
         shutil.rmtree(staging, ignore_errors=True)
         staging.mkdir()
         yield staging
-        _publish_folder(staging, target, overwrite)
+        with _signals_deferred():
+            _publish_folder(staging, target, overwrite)
     except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        _remove_created(created)
+        with _signals_deferred():
+            shutil.rmtree(staging, ignore_errors=True)
+            _remove_created(created)
         raise
 
 
@@ -185,8 +211,10 @@ def atomic_file(target: Path, overwrite: bool = False, inputs: Iterable[Path | N
     try:
         _refuse_concurrent_writer(target)
         yield staging
-        _publish_file(staging, target, overwrite)
+        with _signals_deferred():
+            _publish_file(staging, target, overwrite)
     except BaseException:
-        staging.unlink(missing_ok=True)
-        _remove_created(created)
+        with _signals_deferred():
+            staging.unlink(missing_ok=True)
+            _remove_created(created)
         raise

@@ -234,4 +234,6 @@ def load_spec(path: Path) -> Spec:
         raise SpecError(str(path), where, f"not valid YAML ({error.__class__.__name__})") from None
     except UnicodeDecodeError:
         raise SpecError(str(path), "", "not a text file") from None
+    except RecursionError:
+        raise SpecError(str(path), "", "not valid YAML (nested too deeply)") from None
     return parse_spec(values, str(path), path.parent)
