@@ -108,6 +108,11 @@ def test_unknown_environment_field_is_an_error() -> None:
         load_config(environ={"NEOSLAM_MATCHING__BOGUS": "1"})
 
 
+def test_position_floor_below_a_millimetre_is_refused() -> None:
+    with pytest.raises(ConfigError, match=r"object_map\.position_sigma_floor"):
+        load_config(environ={"NEOSLAM_OBJECT_MAP__POSITION_SIGMA_FLOOR": "1e-9"})
+
+
 def test_environment_field_set_both_as_a_value_and_as_a_section() -> None:
     environ = {"NEOSLAM_KEYFRAMES__SPACING": "5", "NEOSLAM_KEYFRAMES__SPACING__X": "1"}
     with pytest.raises(ConfigError, match="NEOSLAM_KEYFRAMES__SPACING__X: spacing is set as a value"):

@@ -721,7 +721,7 @@ class ObjectMapConfig(_Section):
     )
     position_sigma_floor: float = Field(
         0.3,
-        gt=0,
+        ge=0.001,  # a millimetre: far below, a view's information (1/sigma^2) makes the motion fits singular
         le=1000,
         description="no observed centre is known better than this, m (it lies on the visible surface, which changes "
         "with the view): observations nearer than about 14 m weigh alike",
