@@ -15,7 +15,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from neoslam.errors import ConfigError, InputError
-from neoslam.io.text import read_text
+from neoslam.io.text import read_yaml
 from neoslam.perception.config import PerceptionConfig
 
 __all__ = [
@@ -1089,14 +1089,7 @@ def _read_yaml_mapping(path: Path) -> dict[str, Any]:
     """A config file's sections: one error naming the file (and the line, where YAML knows it) otherwise."""
     if not path.is_file():
         raise InputError(path, "config file not found")
-    try:
-        loaded = yaml.safe_load(read_text(path)) or {}
-    except yaml.YAMLError as error:
-        mark = getattr(error, "problem_mark", None)
-        line = mark.line + 1 if mark is not None else None
-        raise InputError(path, f"not valid YAML ({error.__class__.__name__})", line=line) from None
-    except RecursionError:
-        raise InputError(path, "not valid YAML (nested too deeply)") from None
+    loaded = read_yaml(path) or {}
     if not isinstance(loaded, dict):
         raise InputError(path, "a config file must hold a mapping of sections")
     return loaded

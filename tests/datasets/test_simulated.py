@@ -269,10 +269,16 @@ def test_truth_of_the_wrong_length(dataset: Path) -> None:
     assert _error(dataset).path == path
 
 
-def test_dataset_name_that_is_a_number(dataset: Path) -> None:
+def _with_name(dataset: Path, name: str) -> Path:
+    """dataset.yaml with its `name:` line replaced by `name: <name>` (YAML text, written last)."""
     path = dataset / "dataset.yaml"
     lines = [line for line in path.read_text().splitlines(True) if not line.startswith("name:")]
-    path.write_text("".join(lines) + "name: 5\n")
+    path.write_text("".join(lines) + f"name: {name}\n")
+    return path
+
+
+def test_dataset_name_that_is_a_number(dataset: Path) -> None:
+    _with_name(dataset, "5")
     assert read_dataset(dataset).name == "5"
 
 
@@ -286,9 +292,7 @@ def test_dataset_name_that_is_a_number(dataset: Path) -> None:
     ],
 )
 def test_dataset_name_that_is_no_name(dataset: Path, name: str) -> None:
-    path = dataset / "dataset.yaml"
-    lines = [line for line in path.read_text().splitlines(True) if not line.startswith("name:")]
-    path.write_text("".join(lines) + f"name: {name}\n")
+    path = _with_name(dataset, name)
     error = _error(dataset)
     assert error.path == path
     assert "name must be a string" in error.problem

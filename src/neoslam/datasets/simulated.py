@@ -28,7 +28,7 @@ from neoslam.geometry import integrate_body_velocities
 from neoslam.io.detection_checks import box_problem, centre_problem, label_problem, score_problem
 from neoslam.io.motion_limits import check_time_steps, check_velocities
 from neoslam.io.tables import numeric_column, read_table, write_table
-from neoslam.io.text import read_text
+from neoslam.io.text import read_yaml
 from neoslam.io.trajectory_files import read_tum, write_tum
 from neoslam.sim.simulator import SimulatedRecording
 from neoslam.types import Frame, ObjectObservation, Trajectory
@@ -137,13 +137,7 @@ def is_simulated_dataset(folder: Path) -> bool:
 def _read_meta(path: Path) -> dict:
     if not path.is_file():
         raise InputError(path, "not found: not a simulated dataset folder (made by `neoslam simulate`)")
-    try:
-        meta = yaml.safe_load(read_text(path))
-    except yaml.YAMLError as error:
-        mark = getattr(error, "problem_mark", None)
-        raise InputError(path, "not valid YAML", line=mark.line + 1 if mark is not None else None) from None
-    except RecursionError:
-        raise InputError(path, "not valid YAML (nested too deeply)") from None
+    meta = read_yaml(path)
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise InputError(path, f"format is not {FORMAT!r}")
     if meta.get("version") != VERSION:

@@ -8,10 +8,13 @@ not text is refused by all of them with the line of its first bad byte.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
+
+import yaml
 
 from neoslam.errors import InputError
 
-__all__ = ["read_text"]
+__all__ = ["read_text", "read_yaml"]
 
 
 def read_text(path: Path, missing: str = "file not found") -> str:
@@ -33,3 +36,17 @@ def read_text(path: Path, missing: str = "file not found") -> str:
         line = data[: error.start].count(b"\n") + 1
         bad = data[error.start]
         raise InputError(path, f"not a text file (not UTF-8: byte 0x{bad:02x})", line=line) from None
+
+
+def read_yaml(path: Path, missing: str = "file not found") -> Any:
+    """The file's YAML document (safe types only), read by `read_text`; InputError naming the line where YAML knows
+    it, and for nesting too deep for the parser."""
+    text = read_text(path, missing)
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        line = mark.line + 1 if mark is not None else None
+        raise InputError(path, f"not valid YAML ({error.__class__.__name__})", line=line) from None
+    except RecursionError:
+        raise InputError(path, "not valid YAML (nested too deeply)") from None

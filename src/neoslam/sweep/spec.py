@@ -32,10 +32,10 @@ import os
 from pathlib import Path
 from typing import Any, Literal
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from neoslam.errors import ConfigError
+from neoslam.errors import ConfigError, InputError
+from neoslam.io.text import read_yaml
 
 __all__ = ["AXES", "DEFAULT_METRICS", "SourceSpec", "CellPick", "Spec", "SpecError", "load_spec", "data_root"]
 
@@ -227,13 +227,7 @@ def load_spec(path: Path) -> Spec:
     if not path.is_file():
         raise SpecError(str(path), "", "spec file not found")
     try:
-        values = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as error:
-        mark = getattr(error, "problem_mark", None)
-        where = f"line {mark.line + 1}" if mark is not None else ""
-        raise SpecError(str(path), where, f"not valid YAML ({error.__class__.__name__})") from None
-    except UnicodeDecodeError:
-        raise SpecError(str(path), "", "not a text file") from None
-    except RecursionError:
-        raise SpecError(str(path), "", "not valid YAML (nested too deeply)") from None
+        values = read_yaml(path)
+    except InputError as error:
+        raise SpecError(str(path), f"line {error.line}" if error.line is not None else "", error.problem) from None
     return parse_spec(values, str(path), path.parent)
