@@ -1,75 +1,176 @@
-"""Why revisits were missed: each keyframe that truly revisits a place but gets no true closure, put in one class.
+"""Where revisits are lost: the loop detector replayed over a drive's keyframes, every keyframe stored, and each
+keyframe that truly revisits a place but gets no true closure put in one class, with the detector's state as it was
+when the keyframe was queried.
 
-Ground truth is read here only, for the judgement, never by the detector. A missed keyframe is matched against the
-stored keyframe nearest to it in truth (at least the frame gap earlier):
+Ground truth is read here only, for the judgement, never by the detector. The true place of a keyframe is the
+stored keyframe nearest to it in truth (at least the evaluation's frame gap earlier, within its distance); the place
+the detector would match for it is that keyframe's place (loop.places), and the query its query window.
 
-- relocalised alone: the detector did relocalise it, but no consecutive keyframe confirmed it;
-- beyond the place offset: it verifies against that keyframe, but the fit puts the robot further from it than
-  `max_place_offset` (the place is the same, the poses too far apart to call one place);
-- verifies, not found: it verifies within the offset, yet retrieval or the other gates did not take it;
-- too few shared objects: fewer objects of the two keyframes stand at one place in truth than verification needs;
-- fails verification: enough shared objects, but the match or its fit does not verify.
+- relocalised alone: the detector relocalised it at the true place, but no consecutive keyframe confirmed it;
+- relocalised elsewhere: it relocalised at another place (a false or a too distant match);
+- not retrieved: the true place is not among the places the detector tried (retrieval);
+- too few shared objects: fewer objects of the query window and the true place stand at one place in truth than a
+  match needs;
+- matching fails: enough shared objects, but the spectral matching and its support, or the trimmed fit, keep fewer
+  pairs than needed;
+- verification rejects: the fit is found, but its chi-square test, contradictions or evidence reject it;
+- place, turn or ambiguity: the match verifies, and the robot's offset from the place, the fit's turn, or another
+  place verifying as well reject it.
+
+Also the retrieval rank of each revisit keyframe's true place among the places tried (0: first), and whether the
+place appears among the first `candidates`.
 """
 
 from __future__ import annotations
 
 from collections import Counter
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from neoslam.config import NeoSLAMConfig
 from neoslam.evaluation.loops import LoopCriteria, judge_closures, true_revisits
 from neoslam.geometry import invert_pose, transform_points
-from neoslam.loop.matching import _has_counterpart, _required_matches, match_keyframes
-from neoslam.pipeline import NeoSLAM
-from neoslam.types import Keyframe
+from neoslam.loop.detector import LoopClosureDetector
+from neoslam.loop.matching import (
+    _required_matches,
+    _supported,
+    affinity_matrix,
+    candidate_assignments,
+    spectral_matching,
+)
+from neoslam.loop.verification import contradictions, evidence_bits, fit_consistent, trimmed_fit
+from neoslam.types import Keyframe, LoopClosure
 
 SAME_OBJECT_M = 2.5  # objects of two keyframes this close in the true world, of one label, are one object
+RANKED_PLACES = 100  # retrieval ranks are looked for among this many places
 CLASSES = (
     "relocalised alone",
-    "beyond the place offset",
-    "verifies, not found",
+    "relocalised elsewhere",
+    "not retrieved",
     "too few shared objects",
-    "fails verification",
+    "matching fails",
+    "verification rejects",
+    "place, turn or ambiguity",
 )
 
 
-def _true_centres(keyframe: Keyframe, truth: np.ndarray) -> np.ndarray:
-    """The keyframe's object centres moved from its odometry world to the true world at its frame."""
-    return transform_points(truth[keyframe.frame_index] @ invert_pose(keyframe.pose), keyframe.centers)
+@dataclass
+class Replay:
+    """What the detector did on a drive: its closures, the misses by class and the true places' retrieval ranks."""
+
+    closures: list[LoopClosure] = field(default_factory=list)
+    misses: Counter = field(default_factory=lambda: Counter({name: 0 for name in CLASSES}))
+    ranks: list[int] = field(default_factory=list)  # -1: not among the first RANKED_PLACES places
+    query_s: list[float] = field(default_factory=list)
 
 
-def _shared_objects(query: Keyframe, stored: Keyframe, truth: np.ndarray) -> int:
-    q, s = _true_centres(query, truth), _true_centres(stored, truth)
-    return int(_has_counterpart(q, query.labels, s, stored.labels, SAME_OBJECT_M).sum())
+def _true_centres(keyframe: Keyframe, anchor: Keyframe, truth: np.ndarray) -> np.ndarray:
+    """A keyframe's object centres (in the odometry world of `anchor`'s pass) moved to the true world."""
+    return transform_points(truth[anchor.frame_index] @ invert_pose(anchor.pose), keyframe.centers)
 
 
-def _classify(slam: NeoSLAM, query: Keyframe, stored: Keyframe, truth: np.ndarray, relocalised: bool) -> str:
-    if relocalised:
-        return CLASSES[0]
-    config = slam.config
-    match = match_keyframes(query, stored, config.matching, config.keyframes.e_max)
-    if match.verified:
-        offset = (invert_pose(stored.pose) @ match.transform @ query.pose)[:2, 3]
-        return CLASSES[1] if np.linalg.norm(offset) > config.matching.max_place_offset else CLASSES[2]
-    if _shared_objects(query, stored, truth) < _required_matches(query, stored, config.matching):
-        return CLASSES[3]
-    return CLASSES[4]
+def _shared(query: Keyframe, place: Keyframe, anchor: Keyframe, truth: np.ndarray) -> int:
+    q, s = _true_centres(query, query, truth), _true_centres(place, anchor, truth)
+    same = np.asarray(query.labels)[:, None] == np.asarray(place.labels)[None, :]
+    near = np.linalg.norm(q[:, None, :2] - s[None, :, :2], axis=2) <= SAME_OBJECT_M
+    return int((same & near).any(axis=1).sum())
 
 
-def classify_misses(slam: NeoSLAM, truth: np.ndarray, relocalised: set[int]) -> Counter:
-    """Count the missed revisit keyframes of a drive by class; `truth` holds the true poses (n, 4, 4)."""
-    keyframes = slam.loop_detector.index.keyframes
+def _match_stage(detector: LoopClosureDetector, query: Keyframe, place: Keyframe, tested: int) -> str:
+    """How far the match of the query window against a place gets: the class of a miss, or 'verifies'."""
+    config, e_max = detector.config, detector.e_max
+    candidates = candidate_assignments(query, place, config)
+    affinity = affinity_matrix(query, place, candidates, e_max, config)
+    needed = _required_matches(query, place, config)
+    kept = _supported(affinity, spectral_matching(affinity, candidates, config), config.min_support)
+    if len(kept) < needed:
+        return "matching fails"
+    pairs = candidates[kept]
+    fit, inliers = trimmed_fit(query, place, pairs, config, needed)
+    if fit is None or inliers.sum() < needed:
+        return "matching fails"
+    contradicted = contradictions(query, place, fit.transform, config)
+    evidence = evidence_bits(query, place, pairs[inliers], fit, contradicted, detector.index.label_shares(), config)
+    if (
+        not fit_consistent(fit, config)
+        or contradicted > config.max_contradictions
+        or (config.tolerances == "covariance" and evidence < config.min_evidence_bits + np.log2(max(tested, 1)))
+    ):
+        return "verification rejects"
+    return "verifies"
+
+
+def _places_tried(detector: LoopClosureDetector, query: Keyframe, eligible: np.ndarray) -> list[tuple[int, ...]]:
+    """The members of each place the detector tries for a query, in its order, as far as RANKED_PLACES places."""
+    tried: set[int] = set()
+    places = []
+    for candidate in detector._ordered_candidates(query, eligible):
+        if candidate in tried:
+            continue
+        members = detector._place(candidate).members
+        tried.update(members)
+        places.append(members)
+        if len(places) == RANKED_PLACES:
+            break
+    return places
+
+
+def _classify(
+    detector: LoopClosureDetector, keyframe: Keyframe, odometer: float, true_id: int, truth: np.ndarray, found
+) -> tuple[str, int]:
+    """The class of a missed revisit keyframe, and its true place's retrieval rank."""
+    eligible = detector.index.eligible(keyframe.pose[:3, 3], odometer)
+    places = _places_tried(detector, keyframe, eligible)
+    rank = next((i for i, members in enumerate(places) if true_id in members), -1)
+    if found is not None:
+        match_frame = found.closure.match_frame
+        right = (
+            np.linalg.norm(truth[keyframe.frame_index, :2, 3] - truth[match_frame, :2, 3])
+            <= LoopCriteria().max_distance_m
+        )
+        return ("relocalised alone" if right else "relocalised elsewhere"), rank
+    if not 0 <= rank < detector.config.candidates:
+        return "not retrieved", rank
+    query = detector._query_window(keyframe)
+    place = detector._place(true_id)
+    anchor = detector.index.keyframes[true_id]
+    if _shared(query, place.keyframe, anchor, truth) < _required_matches(query, place.keyframe, detector.config):
+        return "too few shared objects", rank
+    stage = _match_stage(detector, query, place.keyframe, len(eligible))
+    return (stage if stage != "verifies" else "place, turn or ambiguity"), rank
+
+
+def replay(
+    keyframes: list[Keyframe], odometers: list[float], config: NeoSLAMConfig, truth: np.ndarray, classify: bool = True
+) -> Replay:
+    """Drive a fresh detector over the keyframes (every one stored after its query, as with reuse_places off) and
+    judge it against the true poses (n, 4, 4); `classify`: also sort the misses and rank the true places."""
+    import time
+
+    detector = LoopClosureDetector(config.keyframes, config.matching)
+    criteria = LoopCriteria(config.evaluation.loop_max_distance, config.evaluation.loop_min_frame_gap)
     frames = np.array([k.frame_index for k in keyframes])
-    criteria = LoopCriteria()
     positions = truth[:, :2, 3]
     revisit = true_revisits(positions, criteria, frames)
-    correct = judge_closures(slam.detected_closures, positions, criteria)
-    recalled = {c.query_keyframe for c, right in zip(slam.detected_closures, correct, strict=True) if right}
-    misses: Counter = Counter({name: 0 for name in CLASSES})
-    for k in np.flatnonzero(revisit):
-        if k in recalled:
-            continue
-        older = np.flatnonzero(frames <= frames[k] - criteria.min_frame_gap)
-        nearest = int(older[np.argmin(np.linalg.norm(positions[frames[older]] - positions[frames[k]], axis=1))])
-        misses[_classify(slam, keyframes[k], keyframes[nearest], truth, int(k) in relocalised)] += 1
-    return misses
+    out = Replay()
+    pending: dict[int, tuple[Keyframe, float, int, object]] = {}  # revisit keyframes not yet known recalled
+    for k, (keyframe, odometer) in enumerate(zip(keyframes, odometers, strict=True)):
+        if classify and revisit[k]:
+            older = np.flatnonzero(frames <= frames[k] - criteria.min_frame_gap)
+            nearest = older[np.argmin(np.linalg.norm(positions[frames[older]] - positions[frames[k]], axis=1))]
+            found = detector.relocalise(keyframe, odometer)
+            cls, rank = _classify(detector, keyframe, odometer, keyframes[nearest].id, truth, found)
+            pending[keyframe.id] = (cls, rank)
+        start = time.perf_counter()
+        out.closures += detector.query(keyframe, odometer)
+        out.query_s.append(time.perf_counter() - start)
+        detector.add(keyframe, odometer)
+    if classify:
+        right = judge_closures(out.closures, positions, criteria)
+        recalled = {c.query_keyframe for c, ok in zip(out.closures, right, strict=True) if ok}
+        for keyframe_id, (cls, rank) in pending.items():
+            out.ranks.append(rank)
+            if keyframe_id not in recalled:
+                out.misses[cls] += 1
+    return out

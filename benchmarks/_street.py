@@ -13,7 +13,7 @@ from neoslam.config import CameraConfig, NeoSLAMConfig
 from neoslam.datasets.kitti import read_kitti_sequence
 from neoslam.io.frames import camera_points_to_robot
 from neoslam.perception.frontend import open_front_end
-from neoslam.types import Frame, Trajectory
+from neoslam.types import Frame, ObjectObservation, Trajectory
 
 SEQUENCE = "06"
 ASSOCIATION_RADIUS = 2.5  # m: observations of one label this close are one object (keyframes.association_radius)
@@ -65,13 +65,14 @@ def to_world(pose: np.ndarray, centres_camera: np.ndarray) -> np.ndarray:
 
 @dataclass
 class Cluster:
-    """Observations of one object: (frame, world position, depth, depth std) each."""
+    """Observations of one object: (frame, world position, depth, depth std, the observation) each."""
 
     label: str
     frames: list[int] = field(default_factory=list)
     points: list[np.ndarray] = field(default_factory=list)
     depths: list[float] = field(default_factory=list)
     sigmas: list[float] = field(default_factory=list)
+    observations: list[ObjectObservation] = field(default_factory=list)
 
     @property
     def position(self) -> np.ndarray:
@@ -113,6 +114,7 @@ def cluster_observations(run: RealRun) -> list[Cluster]:
             cluster.points.append(point)
             cluster.depths.append(depth)
             cluster.sigmas.append(float(sigma))
+            cluster.observations.append(obs)
     return clusters
 
 

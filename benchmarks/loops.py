@@ -38,7 +38,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
 from _loop_misses import CLASSES as MISS_CLASSES  # noqa: E402
-from _loop_misses import classify_misses  # noqa: E402
+from _loop_misses import replay  # noqa: E402
 from _sweep import SPECS, run_spec, sweep_options, with_changes  # noqa: E402
 from neoslam.config import MatchingConfig, NeoSLAMConfig, load_config  # noqa: E402
 from neoslam.datasets.simulated import read_dataset  # noqa: E402
@@ -137,6 +137,13 @@ def _closure_evidence(slam: NeoSLAM, truth: np.ndarray) -> list[dict]:
     return evidence
 
 
+def _misses(slam: NeoSLAM, config: NeoSLAMConfig, poses: np.ndarray):
+    """The revisit keyframes the detector missed, by why (a replay of the detector over the drive's keyframes)."""
+    keyframes = list(slam.loop_detector.index.keyframes)
+    odometers = [slam.loop_detector.index.odometer(k.id) for k in keyframes]
+    return replay(keyframes, odometers, _every_keyframe_stored(config), poses).misses
+
+
 def _accuracy_of(config: NeoSLAMConfig, data: Path) -> dict:
     slam, poses, query_times, relocalised = _drive(config, data)
     truth = poses[:, :3, 3]
@@ -156,7 +163,7 @@ def _accuracy_of(config: NeoSLAMConfig, data: Path) -> dict:
         "precision_3d": full["precision"],
         "query_ms_median": 1e3 * statistics.median(query_times) if query_times else 0.0,
         "_evidence": _closure_evidence(slam, truth),
-        "_misses": classify_misses(slam, poses, relocalised),
+        "_misses": _misses(slam, config, poses),
         "_keyframes": list(slam.loop_detector.index.keyframes),
         "_odometer": slam.keyframes.odometer_m,
     }

@@ -22,6 +22,7 @@ from neoslam.jobs import (
     simulate_dataset,
     simulation_config,
 )
+from neoslam.sim.profiles import DETECTION_PROFILES
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.types import Trajectory
 
@@ -61,6 +62,21 @@ def test_simulation_config_applies_noise_and_seed() -> None:
     assert settings.simulator.world == CONFIG.simulator.world
     assert settings.grid_cells == CONFIG.grid_cells
     assert simulation_config(CONFIG, None, None) == CONFIG
+
+
+@pytest.mark.parametrize("detector", ["real", "ideal"])
+def test_a_detection_profile_keeps_the_street_values_the_config_set(detector: str) -> None:
+    """A config file with traffic (a share of moving objects) and another disparity noise, run with --detector:
+    the profile's values replace its own profile's, not what the file set."""
+    config = NeoSLAMConfig.model_validate(
+        {"simulator": {"world": {"moving_fraction": 0.2}, "detection": {"disparity_sigma": 0.5}}}
+    )
+    settings = simulation_config(config, "vo", 1, detector).simulator
+    profile = DETECTION_PROFILES[detector]
+    assert settings.detection_profile == detector
+    assert settings.world.moving_fraction == 0.2 and settings.detection.disparity_sigma == 0.5
+    assert settings.world.rows == profile.world.rows
+    assert settings.detection.detection_probability == profile.detection.detection_probability
 
 
 def test_unknown_noise_profile() -> None:

@@ -451,6 +451,13 @@ class KeyframeConfig(_Section):
     depth_sigma_at_1m: float = Field(
         0.0015, gt=0, le=1, description="stereo depth std at 1 m, m; grows with depth^2 and weights the fusion"
     )
+    bearing_sigma: float = Field(
+        0.002,
+        gt=0,
+        le=1,
+        description="std of a view's bearing to an object's centre, rad (about 1.5 px at KITTI's focal length): with "
+        "the depth std it gives each keyframe object's covariance, which the matching's tolerances follow",
+    )
 
     @field_validator("footprints")
     @classmethod
@@ -471,21 +478,80 @@ class MatchingConfig(_Section):
     min_support: int = Field(2, ge=0, le=1000, description="a match needs this many other matches with consistent e_ij")
     min_inliers: int = Field(4, gt=0, le=1000, description="verified matched objects needed to accept a closure")
     min_inlier_ratio: float = Field(
-        0.7, ge=0, le=1, description="and this share of the smaller keyframe's objects (a place, not a pattern)"
+        0.5, ge=0, le=1, description="and this share of the smaller keyframe's objects (a place, not a pattern)"
+    )
+    tolerances: Literal["covariance", "fixed"] = Field(
+        "covariance",
+        description="how far a matched object may lie from where the fit puts it: covariance, by each centre's "
+        "covariance from its views (a chi-square gate; far objects are allowed their depth noise, near ones stay "
+        "strict; loop.verification); fixed, within inlier_distance and max_fit_residual whatever the distance",
+    )
+    centre_sigma: float = Field(
+        0.25,
+        gt=0,
+        le=100,
+        description="std of a keyframe object's centre that no number of views lowers, m, added to its covariance "
+        "in each ground axis: the footprint model that moves a view from the visible surface to the middle, the "
+        "odometry's drift within the keyframe's window",
+    )
+    affinity_sigmas: float = Field(
+        2.5,
+        gt=0,
+        le=100,
+        description="with tolerances covariance: the tolerance of eq. 2 widens from e_max to this many stds of "
+        "|e_ij - e_i'j'| where the centres' covariances make that larger",
+    )
+    inlier_probability: float = Field(
+        0.99,
+        gt=0,
+        lt=1,
+        description="with tolerances covariance: a matched pair is an inlier of the fit within the chi-square "
+        "gate (2 degrees of freedom) that holds a right pair with this probability",
+    )
+    fit_probability: float = Field(
+        0.999,
+        gt=0,
+        lt=1,
+        description="with tolerances covariance: the fit's sum of squared normalised residuals must stay within the "
+        "chi-square bound (2k - 3 degrees of freedom) that holds a right fit with this probability",
+    )
+    max_inlier_distance: float = Field(
+        4.0,
+        gt=0,
+        le=1000,
+        description="with tolerances covariance: no matched pair further apart than this under the fit is an "
+        "inlier, whatever its covariance, m",
+    )
+    object_area: float = Field(
+        150.0,
+        gt=0,
+        le=1e6,
+        description="with tolerances covariance: street area per object, m² (a parked object every 12 m of a "
+        "12 m band): with the label's share, the density of strangers that could fall in a pair's gate by chance",
+    )
+    contradiction_bits: float = Field(
+        4.0, ge=0, le=1000, description="with tolerances covariance: evidence a contradicted object costs, bits"
+    )
+    min_evidence_bits: float = Field(
+        6.0,
+        ge=0,
+        le=1e4,
+        description="with tolerances covariance: a verified match carries at least this much evidence that the two "
+        "keyframes show one place, bits (loop.verification)",
     )
     max_fit_residual: float = Field(
-        0.6, gt=0, le=1000, description="max RMS residual of the rigid fit, m (ground plane)"
+        0.6, gt=0, le=1000, description="with tolerances fixed: max RMS residual of the rigid fit, m (ground plane)"
     )
     inlier_distance: float = Field(
         1.2,
         gt=0,
         le=1000,
-        description="a match fits the rigid transform within this, m; others are left out of the fit and its RMS "
-        "(about 3 σ of a right match seen from the other direction, where a truck's or a cross-street object's "
-        "centre is off by a metre)",
+        description="with tolerances fixed: a match fits the rigid transform within this, m; others are left out of "
+        "the fit and its RMS (about 3 σ of a right match seen from the other direction, where a truck's or a "
+        "cross-street object's centre is off by a metre)",
     )
     max_contradictions: int = Field(
-        2,
+        4,
         ge=0,
         le=10_000,
         description="reject if under the fit more objects than this stand well inside the other keyframe's ground "
@@ -538,6 +604,27 @@ class MatchingConfig(_Section):
         le=360,
         description="degrees per 100 m travelled since the stored keyframe, added to max_yaw_drift_deg",
     )
+    place_radius: float = Field(
+        20.0,
+        ge=0,
+        le=1000,
+        description="a retrieved keyframe is matched as a place: with the stored keyframes of its pass whose robot "
+        "poses lie this close to its own, their objects merged (loop.places); 0: the keyframe alone",
+    )
+    query_radius: float = Field(
+        10.0,
+        ge=0,
+        le=1000,
+        description="the query is the new keyframe with the keyframes just before it whose robot poses lie this "
+        "close to its own, their objects merged, m; 0: the new keyframe alone",
+    )
+    ambiguity_bits: float = Field(
+        8.0,
+        ge=0,
+        le=1e4,
+        description="when two places that the fits put more than consistent_distance apart both verify, the best "
+        "must carry this much more evidence, bits, or the keyframe relocalises nowhere (a repeated layout)",
+    )
     exclude_recent_distance: float = Field(60.0, ge=0, le=1e6, description="never match keyframes from the last metres")
     search_radius: float = Field(
         15.0, gt=0, le=1e5, description="candidates lie this close to the estimated position, m"
@@ -545,7 +632,26 @@ class MatchingConfig(_Section):
     search_radius_per_metre: float = Field(
         0.1, ge=0, le=10, description="plus this share of the distance travelled since the candidate (odometry drift)"
     )
-    candidates: int = Field(10, gt=0, le=1000, description="best retrieval candidates that are matched in full")
+    candidates: int = Field(
+        10, gt=0, le=1000, description="best retrieval candidates that are matched in full, as distinct places"
+    )
+    retrieval: Literal["triangles", "signature"] = Field(
+        "triangles",
+        description="how the eligible keyframes are ranked: triangles, by the object triangles they share with the "
+        "query (geometric hashing, loop.triangles); signature, by a histogram of labels and pairwise distances",
+    )
+    triangle_side_bin: float = Field(
+        1.0, gt=0, le=100, description="retrieval triangles: sides are rounded to bins this wide, m"
+    )
+    triangle_objects: int = Field(
+        12,
+        ge=3,
+        le=40,
+        description="retrieval triangles: of this many objects nearest a keyframe's current object (12: 220 triangles)",
+    )
+    triangle_max_side: float = Field(
+        40.0, gt=0, le=500, description="retrieval triangles: none with a side longer than this, m"
+    )
     power_iterations: int = Field(
         50,
         gt=0,

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
+from pydantic import BaseModel
 from tqdm import tqdm
 
 from neoslam.config import NOISE_PROFILES, MotionLimitsConfig, NeoSLAMConfig
@@ -82,7 +83,8 @@ def simulation_config(
     config: NeoSLAMConfig, noise: str | None, seed: int | None, detector: str | None = None
 ) -> NeoSLAMConfig:
     """The config with a named odometry noise profile, a named detection profile (its detection and street values
-    replace the config's) and a seed applied to its simulator section."""
+    replace the config's profile's, the values the config file set itself stay: a share of moving objects, say)
+    and a seed applied to its simulator section."""
     update: dict[str, Any] = {}
     if noise is not None:
         if noise not in NOISE_PROFILES:
@@ -91,11 +93,21 @@ def simulation_config(
     if detector is not None:
         if detector not in DETECTION_PROFILES:
             raise ConfigError(f"unknown detection profile {detector!r}; choose one of {', '.join(DETECTION_PROFILES)}")
-        profile = DETECTION_PROFILES[detector]
-        update |= {"detection_profile": detector, "detection": profile.detection, "world": profile.world}
+        profile, current = DETECTION_PROFILES[detector], DETECTION_PROFILES[config.simulator.detection_profile]
+        update |= {
+            "detection_profile": detector,
+            "detection": _profile_with_own_values(profile.detection, current.detection, config.simulator.detection),
+            "world": _profile_with_own_values(profile.world, current.world, config.simulator.world),
+        }
     if seed is not None:
         update["seed"] = seed
     return config.model_copy(update={"simulator": config.simulator.model_copy(update=update)})
+
+
+def _profile_with_own_values(profile: BaseModel, current: BaseModel, section: BaseModel) -> BaseModel:
+    """A profile's section with the values in which the config's section differs from its own profile's."""
+    own = {name: value for name, value in section if value != getattr(current, name)}
+    return profile.model_copy(update=own)
 
 
 def with_backend(config: NeoSLAMConfig, backend: str | None) -> NeoSLAMConfig:

@@ -17,7 +17,7 @@ import numpy as np
 
 from neoslam.cells.place import offset_in_cells
 from neoslam.config import NeoSLAMConfig
-from neoslam.geometry import invert_pose, transform_points
+from neoslam.geometry import invert_pose
 from neoslam.loop.index import KeyframeIndex
 from neoslam.loop.relocaliser import MapRelocaliser
 from neoslam.store.records import MapState, SessionRecord, StoredClosure
@@ -63,15 +63,7 @@ class StoredMap:
         moved = slam.experience_map.correction(slam.experience_map.experience_of(keyframe.id))
         if frame is not None:
             moved = frame @ moved
-        return Keyframe(
-            keyframe.id,
-            keyframe.frame_index,
-            moved @ keyframe.pose,
-            transform_points(moved, keyframe.centers),
-            keyframe.labels,
-            keyframe.patches,
-            keyframe.provisional,
-        )
+        return keyframe.moved(moved)
 
     def relocalise(
         self, slam: NeoSLAM, frame_index: int, keyframe: Keyframe, odometry: np.ndarray

@@ -59,13 +59,34 @@ class Keyframe:
     patches: np.ndarray  # (n, h, w) uint8
     # (n,) bool: objects not known to be static yet (moving_objects.unjudged: wait); None: none of them
     provisional: np.ndarray | None = None
+    # (n, 2, 2) ground-plane covariance of each centre as its views give it, m²; None: zeros (matching adds its
+    # own floor, matching.centre_sigma, to every object)
+    covariances: np.ndarray | None = None
     distances: np.ndarray = field(init=False)  # (n, n) pairwise e_ij, eq. 1
 
     def __post_init__(self) -> None:
-        provisional = np.zeros(len(self.labels), dtype=bool) if self.provisional is None else self.provisional
+        n = len(self.labels)
+        provisional = np.zeros(n, dtype=bool) if self.provisional is None else self.provisional
         object.__setattr__(self, "provisional", np.asarray(provisional, dtype=bool))
+        covariances = np.zeros((n, 2, 2)) if self.covariances is None else self.covariances
+        object.__setattr__(self, "covariances", np.asarray(covariances, dtype=float).reshape(n, 2, 2))
         diff = self.centers[:, None, :] - self.centers[None, :, :]
         object.__setattr__(self, "distances", np.linalg.norm(diff, axis=-1))
+
+    def moved(self, transform: np.ndarray) -> Keyframe:
+        """The same keyframe in another frame: pose and centres moved by `transform` (4, 4), the centres'
+        covariances turned by its rotation in the ground plane."""
+        turn = transform[:2, :2]
+        return Keyframe(
+            self.id,
+            self.frame_index,
+            transform @ self.pose,
+            self.centers @ transform[:3, :3].T + transform[:3, 3],
+            self.labels,
+            self.patches,
+            self.provisional,
+            turn @ self.covariances @ turn.T,
+        )
 
 
 @dataclass(slots=True)

@@ -158,7 +158,9 @@ def test_consistency_is_judged_at_the_place_not_at_the_world_origin(passes: TwoP
 
 
 def test_an_isolated_relocalisation_is_not_accepted(passes: TwoPasses, make_street) -> None:
-    detector = LoopClosureDetector(KEYFRAMES, MATCHING)
+    # Every other keyframe shows another street at the same place, which no drive gives: each keyframe alone, not
+    # merged with the one before (query_radius 0), the window being what a real drive keeps consistent.
+    detector = LoopClosureDetector(KEYFRAMES, MATCHING.model_copy(update={"query_radius": 0.0}))
     passes.first_pass(detector)
     elsewhere = make_street(np.random.default_rng(99), count=60, length=140.0)  # other objects, other looks
     xs = np.arange(20.0, 81.0, 5.0)
@@ -184,8 +186,9 @@ def test_relocalisations_of_keyframes_that_are_not_consecutive_are_not_accepted(
 @pytest.mark.parametrize(("consistent_distance", "accepted"), [(MATCHING.consistent_distance, 0), (4.0, 9)])
 def test_consecutive_relocalisations_must_agree(passes: TwoPasses, consistent_distance: float, accepted: int) -> None:
     # Every other keyframe fits 3 m further along the street: each relocalises at the right place, but no two
-    # consecutive ones agree on the transform (what a repeated pattern does).
-    config = MATCHING.model_copy(update={"consistent_distance": consistent_distance})
+    # consecutive ones agree on the transform (what a repeated pattern does). Each keyframe alone (query_radius 0):
+    # two keyframes 3 m apart in the odometry's frame of one pass are no drive's.
+    config = MATCHING.model_copy(update={"consistent_distance": consistent_distance, "query_radius": 0.0})
     detector = LoopClosureDetector(KEYFRAMES, config)
     passes.first_pass(detector)
     drift = passes.yaw_pose(DRIFT_YAW, DRIFT)

@@ -69,7 +69,7 @@ def test_eligible_radius_grows_with_the_distance_travelled_since(make_keyframe) 
 
 def test_candidates_are_the_best_signatures_first(make_keyframe) -> None:
     rng = np.random.default_rng(2)
-    config = CONFIG.model_copy(update={"candidates": 5})
+    config = CONFIG.model_copy(update={"candidates": 5, "retrieval": "signature"})
     query = _random_keyframe(make_keyframe, rng, count=14, id=99)
     index = KeyframeIndex(config)
     for i in range(12):  # more and more of the query's objects replaced by others, in a shuffled order
@@ -123,3 +123,19 @@ def test_stored_keyframes_are_named_by_id_when_ids_skip(make_keyframe) -> None:
         assert index.candidates(keyframe, 1e6)[0] == keyframe.id
     with pytest.raises(ValueError, match="ids must increase"):
         index.add(_random_keyframe(make_keyframe, rng, id=5), now)
+
+
+def test_candidates_are_the_keyframes_sharing_most_triangles_first(make_keyframe) -> None:
+    """The same keyframes as above ranked by retrieval triangles: fewer of the query's objects replaced, more of
+    its triangles shared, a higher rank."""
+    rng = np.random.default_rng(2)
+    query = _random_keyframe(make_keyframe, rng, count=14, id=99)
+    index = KeyframeIndex(CONFIG)
+    replaced_counts = rng.permutation(np.arange(0, 12))
+    for i, replaced in enumerate(replaced_counts):
+        centres = query.centers.copy()
+        centres[:replaced] = rng.uniform(-30, 30, (replaced, 3))
+        index.add(make_keyframe(centres, query.labels, id=i), 0.0)
+    ranked = index.ranked(query, index.eligible(query.pose[:3, 3], 100.0))
+    np.testing.assert_array_equal(ranked[:3], np.argsort(replaced_counts)[:3])
+    assert index.nbytes > 0

@@ -21,7 +21,11 @@ CONFIG = MatchingConfig()
 E_MAX = KeyframeConfig().e_max
 # For the tests of matching itself, whose queries drop objects and add strangers in the middle of the keyframe:
 # the contradiction check (tested on its own below) rightly counts those against a place.
-TOLERANT = CONFIG.model_copy(update={"max_contradictions": 1_000})
+TOLERANT = CONFIG.model_copy(update={"max_contradictions": 1_000, "contradiction_bits": 0.0})
+# The verification in metres whatever the distance (tolerances fixed), with the share of objects it was designed
+# with: the tests of its thresholds.
+FIXED = CONFIG.model_copy(update={"tolerances": "fixed", "min_inlier_ratio": 0.7, "max_contradictions": 2})
+FIXED_TOLERANT = FIXED.model_copy(update={"max_contradictions": 1_000})
 
 
 def _grey(*levels: float) -> np.ndarray:
@@ -208,11 +212,16 @@ def test_unrelated_objects_are_not_verified(make_keyframe, make_street, seed: in
     street = make_street(rng, count=12, length=50.0)
     stored = make_keyframe(street.centers, street.labels, street.patches(rng, range(12)))
     other = make_street(rng, count=12, length=50.0)
-    # Same classes and the same looks as the stored objects, but elsewhere: only geometry can tell.
-    query = make_keyframe(other.centers, street.labels, street.patches(rng, range(12)))
+    # Same classes and the same looks as the stored objects, but elsewhere and in another order: only geometry can
+    # tell. (Two streets of this kind with their classes in the same order are a copy of each other within a metre
+    # or two, objects every 3-6 m on alternate kerbs: a repeated layout, which no verification of objects can tell
+    # from the place, and which the drift-bounded retrieval and the closure gate keep apart.)
+    order = rng.permutation(12)
+    query = make_keyframe(other.centers, [street.labels[i] for i in order], street.patches(rng, order))
     assert len(candidate_assignments(query, stored, CONFIG)) >= 12
     match = match_keyframes(query, stored, CONFIG, E_MAX)
     assert not match.verified and match.verified_score == 0.0
+    assert not match_keyframes(query, stored, FIXED, E_MAX).verified
 
 
 def test_one_gross_outlier_does_not_drag_the_fit(make_keyframe, make_yaw_pose) -> None:
@@ -276,12 +285,12 @@ def test_min_inliers_is_enforced(make_keyframe, make_street, count: int, verifie
 def test_min_inlier_ratio_is_enforced(make_keyframe, make_street, shared: int, ratio: float, verified: bool) -> None:
     # Ten objects each: 0.7 x 10 = 7 must match, whatever min_inliers (4) says.
     query, stored = _copy(make_keyframe, make_street, np.random.default_rng(shared), 10, shared)
-    match = match_keyframes(query, stored, TOLERANT.model_copy(update={"min_inlier_ratio": ratio}), E_MAX)
+    match = match_keyframes(query, stored, FIXED_TOLERANT.model_copy(update={"min_inlier_ratio": ratio}), E_MAX)
     assert match.n_matches == shared
     assert match.verified is verified
 
 
-@pytest.mark.parametrize(("inlier_distance", "verified"), [(1.5, False), (CONFIG.inlier_distance, True)])
+@pytest.mark.parametrize(("inlier_distance", "verified"), [(1.5, False), (FIXED.inlier_distance, True)])
 def test_objects_a_metre_off_are_left_out_of_the_fit(
     make_keyframe, make_street, inlier_distance: float, verified: bool
 ) -> None:
@@ -291,12 +300,12 @@ def test_objects_a_metre_off_are_left_out_of_the_fit(
     moved = query.centers.copy()
     moved[[2, 5]] += [[1.45, 0.0, 0.0], [-1.45, 0.0, 0.0]]
     query = make_keyframe(moved, query.labels, query.patches)
-    match = match_keyframes(query, stored, CONFIG.model_copy(update={"inlier_distance": inlier_distance}), E_MAX)
+    match = match_keyframes(query, stored, FIXED.model_copy(update={"inlier_distance": inlier_distance}), E_MAX)
     assert match.verified is verified
     if verified:  # the six, with a residual of a perfect copy
         assert sorted(match.pairs[:, 0].tolist()) == [0, 1, 3, 4, 6, 7] and match.residual_rms < 1e-6
     else:  # all eight kept: the two off ones lift the RMS over the limit
-        assert match.n_matches == 8 and match.residual_rms > CONFIG.max_fit_residual
+        assert match.n_matches == 8 and match.residual_rms > FIXED.max_fit_residual
 
 
 def test_a_match_short_of_the_needed_count_is_given_up_before_the_fit(make_keyframe, make_street, monkeypatch) -> None:
@@ -306,12 +315,12 @@ def test_a_match_short_of_the_needed_count_is_given_up_before_the_fit(make_keyfr
         fits.append(len(query))
         return fit_yaw_translation(query, stored)
 
-    monkeypatch.setattr("neoslam.loop.matching.fit_yaw_translation", counted_fit)
-    short, stored = _copy(make_keyframe, make_street, np.random.default_rng(6), 10, 6)  # 6 of 10 shared, 7 needed
+    monkeypatch.setattr("neoslam.loop.verification.fit_yaw_translation", counted_fit)
+    short, stored = _copy(make_keyframe, make_street, np.random.default_rng(6), 10, 4)  # 4 of 10 shared, 5 needed
     match = match_keyframes(short, stored, CONFIG, E_MAX)
-    assert not match.verified and match.n_matches == 6 and fits == []
-    enough, stored = _copy(make_keyframe, make_street, np.random.default_rng(7), 10, 7)
-    assert match_keyframes(enough, stored, TOLERANT, E_MAX).verified and fits == [7]
+    assert not match.verified and match.n_matches == 4 and fits == []
+    enough, stored = _copy(make_keyframe, make_street, np.random.default_rng(7), 10, 5)
+    assert match_keyframes(enough, stored, TOLERANT, E_MAX).verified and fits[0] == 5
 
 
 @pytest.mark.parametrize("k", [4, 6, 9])
@@ -435,17 +444,17 @@ def test_a_match_without_distance_consistent_support_is_left_out_before_the_fit(
         fits.append(len(query_points))
         return fit_yaw_translation(query_points, stored_points)
 
-    monkeypatch.setattr("neoslam.loop.matching.fit_yaw_translation", counted_fit)
+    monkeypatch.setattr("neoslam.loop.verification.fit_yaw_translation", counted_fit)
     match = match_keyframes(query, stored, TOLERANT, E_MAX)
-    assert fits == [4]  # ... and never reaches the fit
+    assert fits[0] == 4  # ... and never reaches the fit
     assert match.verified and sorted(match.pairs.tolist()) == [[0, 0], [1, 1], [2, 2], [3, 3]]
 
 
 def test_provisional_objects_still_count_in_the_share_a_match_must_explain(make_keyframe, make_street) -> None:
-    """6 of 10 match, short of 0.7 x 10, whether or not the other four are provisional: leaving them out of the
+    """4 of 10 match, short of 0.5 x 10, whether or not the other six are provisional: leaving them out of the
     share let false closures through where most objects are provisional (heavy odometry)."""
-    query, stored = _copy(make_keyframe, make_street, np.random.default_rng(6), 10, 6)
-    strangers = np.arange(10) >= 6
+    query, stored = _copy(make_keyframe, make_street, np.random.default_rng(6), 10, 4)
+    strangers = np.arange(10) >= 4
     marked = Keyframe(query.id, query.frame_index, query.pose, query.centers, query.labels, query.patches, strangers)
     assert not match_keyframes(query, stored, TOLERANT, E_MAX).verified
     assert not match_keyframes(marked, stored, TOLERANT, E_MAX).verified

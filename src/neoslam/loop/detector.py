@@ -1,11 +1,17 @@
-"""Loop-closure detection: retrieve candidates, match them, verify, pin the closure to the nearest place, and
-accept only when consecutive keyframes relocalise consistently (a repeated pattern rarely repeats twice in a row
-with the same offset; a revisited place does)."""
+"""Loop-closure detection: retrieve candidates, match each as a place (loop.places) and verify, keep the match
+with the most evidence unless another place verifies nearly as well (a repeated layout: then none), pin the closure
+to the stored keyframe nearest to where the fit puts the robot, and accept only when consecutive keyframes
+relocalise consistently (a repeated pattern rarely repeats twice in a row with the same offset; a revisited place
+does).
+
+Places that earlier closures joined are one place however far apart their odometry puts them (a street driven
+three times verifies against both earlier passes): they never make a keyframe ambiguous."""
 
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
+from collections.abc import Iterator
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -13,11 +19,13 @@ from neoslam.config import KeyframeConfig, MatchingConfig
 from neoslam.geometry import invert_pose, rotation_angle, transform_points
 from neoslam.loop.index import KeyframeIndex
 from neoslam.loop.matching import KeyframeMatch, match_keyframes
+from neoslam.loop.places import Place, PlaceCache, merge_keyframes
 from neoslam.types import Keyframe, LoopClosure
 
 __all__ = ["LoopClosureDetector"]
 
 PASS_NEIGHBOURS = 3  # stored keyframes this close in id to a match belong to the same pass of a place
+QUERY_HISTORY = 16  # keyframes kept for the query window (matching.query_radius: a few keyframe spacings)
 
 
 @dataclass(frozen=True)
@@ -26,6 +34,30 @@ class _Relocalisation:
     position: np.ndarray  # (3,) of the query keyframe's robot, query world
     transform: np.ndarray  # query world -> stored world
     closure: LoopClosure
+    evidence: float = 0.0  # bits (loop.verification.evidence_bits)
+    members: tuple[int, ...] = ()  # the stored keyframes of the place matched
+
+
+class _JoinedPlaces:
+    """Stored keyframes that accepted closures showed to be one place (union-find over keyframe ids)."""
+
+    def __init__(self) -> None:
+        self._parent: dict[int, int] = {}
+
+    def find(self, keyframe_id: int) -> int:
+        root = keyframe_id
+        while self._parent.get(root, root) != root:
+            root = self._parent[root]
+        while keyframe_id != root:  # path compression
+            self._parent[keyframe_id], keyframe_id = root, self._parent[keyframe_id]
+        return root
+
+    def join(self, a: int, b: int) -> None:
+        self._parent[self.find(a)] = self.find(b)
+
+    def same(self, a: tuple[int, ...], b: tuple[int, ...]) -> bool:
+        """Whether two places share a keyframe or were joined."""
+        return bool({self.find(k) for k in a} & {self.find(k) for k in b})
 
 
 class LoopClosureDetector:
@@ -35,11 +67,17 @@ class LoopClosureDetector:
         self.e_max = keyframes.e_max
         self.config = matching
         self.index = KeyframeIndex(matching)
+        self.places = PlaceCache(matching.place_radius, keyframes.association_radius)
+        self.joined = _JoinedPlaces()
         self._recent: deque[_Relocalisation | None] = deque(maxlen=max(matching.consecutive - 1, 0))
+        self._queried: deque[Keyframe] = deque(maxlen=QUERY_HISTORY)  # the last keyframes queried
         self._emitted: set[int] = set()
 
-    def _match(self, query: Keyframe, stored: int) -> KeyframeMatch:
-        return match_keyframes(query, self.index.keyframes[stored], self.config, self.e_max)
+    def _match(self, query: Keyframe, stored: Keyframe, tested: int = 1) -> KeyframeMatch:
+        return match_keyframes(query, stored, self.config, self.e_max, self.index.label_shares(), tested)
+
+    def _place(self, keyframe_id: int) -> Place:
+        return self.places.place(self.index.keyframes, self.index.slot(keyframe_id))
 
     def _closure(self, query: Keyframe, match: KeyframeMatch) -> tuple[LoopClosure, np.ndarray]:
         """The closure and the offset (x, y, z) between the two robot poses implied by the fit."""
@@ -56,38 +94,115 @@ class LoopClosureDetector:
         )
         return closure, relative[:3, 3]
 
-    def _ordered_candidates(self, keyframe: Keyframe, odometer_m: float, eligible: np.ndarray) -> list[int]:
-        """Retrieval candidates; when the previous keyframe relocalised, first the stored keyframes next to its
-        match: a place driven a third time then relocalises against one earlier pass, whose frame (and drift) the
-        consistency test compares, rather than hopping between passes."""
-        candidates = [int(c) for c in self.index.candidates(keyframe, odometer_m)]
+    def _ordered_candidates(self, keyframe: Keyframe, eligible: np.ndarray) -> Iterator[int]:
+        """Retrieval candidates, best first; when the previous keyframe relocalised, first the stored keyframes next
+        to its match: a place driven a third time then relocalises against one earlier pass, whose frame (and drift)
+        the consistency test compares, rather than hopping between passes."""
         previous = self._recent[-1] if self._recent else None
-        if previous is None or previous.keyframe_id != keyframe.id - 1:
-            return candidates
-        near = previous.closure.match_keyframe + np.arange(-PASS_NEIGHBOURS, PASS_NEIGHBOURS + 1)
-        preferred = [int(c) for c in near if c in set(eligible.tolist())]
-        return preferred + [c for c in candidates if c not in preferred]
+        preferred: list[int] = []
+        if previous is not None and previous.keyframe_id == keyframe.id - 1:
+            near = previous.closure.match_keyframe + np.arange(-PASS_NEIGHBOURS, PASS_NEIGHBOURS + 1)
+            preferred = [int(c) for c in near[np.isin(near, eligible)]]
+        yield from preferred
+        for candidate in self.index.ranked(keyframe, eligible):
+            if int(candidate) not in preferred:
+                yield int(candidate)
 
     def relocalise(self, keyframe: Keyframe, odometer_m: float) -> _Relocalisation | None:
-        """The first verified match among the retrieval candidates, moved to the stored keyframe nearest to the
-        place the fit puts the robot (so it joins the same place, not a neighbour sharing the same objects)."""
+        """The verified place match with the most evidence among the retrieval candidates (each tried once as a
+        place), pinned to the member nearest to where the fit puts the robot; None when none verifies, or when
+        another place, not joined to it, verifies with nearly as much evidence."""
         eligible = self.index.eligible(keyframe.pose[:3, 3], odometer_m)
-        for candidate in self._ordered_candidates(keyframe, odometer_m, eligible):
-            match = self._match(keyframe, int(candidate))
-            if not match.verified:
+        eligible_ids = set(eligible.tolist())
+        query = self._query_window(keyframe)
+        if not self._queried or self._queried[-1].id != keyframe.id:
+            self._queried.append(keyframe)
+        found: list[_Relocalisation] = []
+        tried: set[int] = set()
+        places = 0
+        for candidate in self._ordered_candidates(keyframe, eligible):
+            if places == self.config.candidates:
+                break
+            if candidate in tried:
                 continue
-            same_pass = eligible[np.abs(eligible - match.match) <= PASS_NEIGHBOURS]
-            nearest = self.index.nearest((match.transform @ keyframe.pose)[:3, 3], same_pass)
-            if nearest != match.match:
-                match = self._match(keyframe, nearest)
-                if not match.verified:
-                    continue
-            closure, offset = self._closure(keyframe, match)
-            same_place = np.linalg.norm(offset[:2]) <= self.config.max_place_offset
-            level = abs(offset[2]) <= self.config.max_vertical_offset
-            if same_place and level and self._plausible_turn(match, odometer_m):
-                return _Relocalisation(keyframe.id, keyframe.pose[:3, 3].copy(), match.transform, closure)
-        return None
+            place = self._place(candidate)
+            tried.update(place.members)
+            places += 1
+            relocalisation = self._relocalisation(query, place, eligible_ids, odometer_m)
+            if relocalisation is not None:
+                found.append(relocalisation)
+        return self._unambiguous(found)
+
+    def _query_window(self, keyframe: Keyframe) -> Keyframe:
+        """The keyframe with the keyframes queried just before it (ids one less each) whose robot poses lie within
+        `query_radius` of its own, merged as a place is (loop.places). Those keyframes need not be stored: a
+        keyframe recognised as a stored one is not stored again (lifelong mapping)."""
+        members = [keyframe]
+        for previous in reversed(self._queried):
+            if previous.id == keyframe.id:
+                continue  # queried before (relocalise, then query)
+            if self.config.query_radius <= 0 or previous.id != members[-1].id - 1:
+                break
+            if np.linalg.norm(previous.pose[:2, 3] - keyframe.pose[:2, 3]) > self.config.query_radius:
+                break
+            members.append(previous)
+        if len(members) == 1:
+            return keyframe
+        return merge_keyframes(members, keyframe, self.places.association_radius)
+
+    def _relocalisation(
+        self, keyframe: Keyframe, place: Place, eligible: set[int], odometer_m: float
+    ) -> _Relocalisation | None:
+        """The keyframe relocalised in one place, or None when the match fails verification or puts the robot
+        too far from the place's keyframes, off its level, or turned more than the odometry can drift."""
+        match = self._match(keyframe, place.keyframe, len(eligible))
+        members = np.array([m for m in place.members if m in eligible], dtype=int)
+        if not match.verified or not len(members):
+            return None
+        nearest = self.index.nearest((match.transform @ keyframe.pose)[:3, 3], members)
+        evidence = match.evidence + self._drift_bits(keyframe, match.transform, nearest, odometer_m)
+        if evidence < self.config.min_evidence_bits + np.log2(max(len(eligible), 1)):
+            return None
+        match = replace(match, match=nearest, evidence=evidence)
+        closure, offset = self._closure(keyframe, match)
+        same_place = np.linalg.norm(offset[:2]) <= self.config.max_place_offset
+        level = abs(offset[2]) <= self.config.max_vertical_offset
+        if not (same_place and level and self._plausible_turn(match, odometer_m)):
+            return None
+        position = keyframe.pose[:3, 3].copy()
+        return _Relocalisation(keyframe.id, position, match.transform, closure, match.evidence, place.members)
+
+    def _unambiguous(self, found: list[_Relocalisation]) -> _Relocalisation | None:
+        """The relocalisation with the most evidence (or the best in the pass the previous keyframe relocalised in),
+        unless one that puts the robot elsewhere, in a place not joined to it, comes within `ambiguity_bits` of
+        it."""
+        if not found:
+            return None
+        found = sorted(found, key=lambda r: -r.evidence)
+        best = found[0]
+        previous = self._recent[-1] if self._recent else None
+        if previous is not None and previous.keyframe_id == found[0].keyframe_id - 1:
+            # the pass the previous keyframe relocalised in, when this one verifies there too: the consistency
+            # test compares the two fits, and another pass of the same street has its own drift
+            best = next((r for r in found if self._consistent(previous, r)), best)
+        for other in found:
+            if other is best or best.evidence - other.evidence >= self.config.ambiguity_bits:
+                continue
+            if not self._consistent(best, other) and not self.joined.same(best.members, other.members):
+                return None
+        return best
+
+    def _drift_bits(self, keyframe: Keyframe, transform: np.ndarray, stored: int, odometer_m: float) -> float:
+        """What a fit that moves the robot by d from where its odometry puts it costs, bits: the odometry's drift
+        since the stored keyframe is taken as Gaussian with the search radius R there three standard deviations,
+        -log2 of its density ratio to the centre, 4.5 (d / R)² / ln 2 (6.5 bits at R). With tolerances fixed: none."""
+        if self.config.tolerances == "fixed":
+            return 0.0
+        travelled = odometer_m - self.index.odometer(stored)
+        radius = self.config.search_radius + self.config.search_radius_per_metre * travelled
+        position = keyframe.pose[:3, 3]
+        moved = np.linalg.norm(transform_points(transform, position[None])[0, :2] - position[:2])
+        return float(-4.5 * (moved / radius) ** 2 / np.log(2.0))
 
     def _plausible_turn(self, match: KeyframeMatch, odometer_m: float) -> bool:
         """Whether the fit's rotation is a heading drift the odometry can have built up since the stored keyframe
@@ -120,6 +235,8 @@ class LoopClosureDetector:
             return []
         if any(h.keyframe_id != keyframe.id - len(history) + i for i, h in enumerate(history)):
             return []  # not consecutive keyframes
+        for h in [*history, current]:
+            self.joined.join(h.closure.query_keyframe, h.closure.match_keyframe)
         accepted = [h.closure for h in [*history, current] if h.keyframe_id not in self._emitted]
         # only the last `consecutive` keyframes can be emitted again: forget the others (a lifelong drive)
         self._emitted = {k for k in self._emitted if k > keyframe.id - len(history) - 1}
@@ -132,5 +249,5 @@ class LoopClosureDetector:
     def scores(self, keyframe: Keyframe) -> tuple[np.ndarray, np.ndarray]:
         """Spectral and verified matching scores of `keyframe` against every stored keyframe (paper Fig. 4c), with
         no retrieval and no gate."""
-        matches = [self._match(keyframe, stored.id) for stored in self.index.keyframes]
+        matches = [self._match(keyframe, stored) for stored in self.index.keyframes]
         return np.array([m.score for m in matches]), np.array([m.verified_score for m in matches])

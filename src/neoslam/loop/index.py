@@ -17,6 +17,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from neoslam.config import MatchingConfig
+from neoslam.loop.triangles import TriangleIndex
 from neoslam.types import Keyframe
 
 __all__ = ["KeyframeIndex", "StoredKeyframes", "signature"]
@@ -45,6 +46,7 @@ class StoredKeyframes:
 
     def __init__(self) -> None:
         self._by_id: dict[int, Keyframe] = {}
+        self._ordered: list[Keyframe] = []
 
     def __getitem__(self, keyframe_id: int) -> Keyframe:
         return self._by_id[int(keyframe_id)]
@@ -62,6 +64,11 @@ class StoredKeyframes:
         if keyframe.id in self._by_id:
             raise ValueError(f"keyframe {keyframe.id} is stored already")
         self._by_id[keyframe.id] = keyframe
+        self._ordered.append(keyframe)
+
+    def at(self, slot: int) -> Keyframe:
+        """The keyframe stored `slot`-th (0: the first)."""
+        return self._ordered[slot]
 
 
 class KeyframeIndex:
@@ -75,6 +82,8 @@ class KeyframeIndex:
         self._positions = np.zeros((INITIAL_CAPACITY, 2))
         self._odometer = np.zeros(INITIAL_CAPACITY)
         self._signatures = np.zeros((INITIAL_CAPACITY, LABEL_BINS + len(DISTANCE_BINS) - 1))
+        self._label_counts: dict[str, int] = {}
+        self._triangles = TriangleIndex(config.triangle_side_bin, config.triangle_objects, config.triangle_max_side)
 
     def __len__(self) -> int:
         return len(self.keyframes)
@@ -93,7 +102,19 @@ class KeyframeIndex:
         self._positions[n] = keyframe.pose[:2, 3]
         self._odometer[n] = odometer_m
         self._signatures[n] = signature(keyframe)
+        self._triangles.add(keyframe)
         self.keyframes.append(keyframe)
+        for label in keyframe.labels:
+            self._label_counts[label] = self._label_counts.get(label, 0) + 1
+
+    def label_shares(self) -> dict[str, float]:
+        """Each label's share among the stored keyframes' objects (an object in several keyframes counts in each)."""
+        total = sum(self._label_counts.values())
+        return {label: count / total for label, count in self._label_counts.items()}
+
+    def slot(self, keyframe_id: int) -> int:
+        """Where keyframe `keyframe_id` stands in the order stored."""
+        return self._slots[int(keyframe_id)]
 
     def odometer(self, keyframe_id: int) -> float:
         """The odometer reading (m) when stored keyframe `keyframe_id` was made."""
@@ -110,12 +131,26 @@ class KeyframeIndex:
         near = np.linalg.norm(self._positions[:n] - position[:2], axis=1) <= radius
         return self._ids[:n][near & (travelled >= self.config.exclude_recent_distance)]
 
+    def ranked(self, query: Keyframe, eligible: np.ndarray) -> np.ndarray:
+        """The eligible ids (increasing), most alike to the query first: by shared triangles (`retrieval:
+        triangles`, loop.triangles), or by signature."""
+        slots = self._slots_of(eligible)
+        if self.config.retrieval == "triangles":
+            similarity = self._triangles.scores(query)[slots]
+        else:
+            similarity = self._signatures[slots] @ signature(query)
+        return eligible[np.argsort(-similarity, kind="stable")]
+
     def candidates(self, query: Keyframe, odometer_m: float) -> np.ndarray:
-        """Ids of the best `candidates` eligible keyframes by signature similarity, best first."""
+        """Ids of the best `candidates` eligible keyframes, best first."""
         eligible = self.eligible(query.pose[:3, 3], odometer_m)
-        similarity = self._signatures[self._slots_of(eligible)] @ signature(query)
-        order = np.argsort(-similarity, kind="stable")[: self.config.candidates]
-        return eligible[order]
+        return self.ranked(query, eligible)[: self.config.candidates]
+
+    @property
+    def nbytes(self) -> int:
+        """Memory of the retrieval arrays (positions, odometer, signatures, triangle keys), bytes."""
+        arrays = (self._ids, self._positions, self._odometer, self._signatures)
+        return int(sum(a.nbytes for a in arrays) + self._triangles.nbytes)
 
     def nearest(self, position: np.ndarray, among: np.ndarray) -> int:
         """The id of the keyframe among `among` (ids) whose pose is closest to a position (x, y)."""

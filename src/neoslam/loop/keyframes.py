@@ -18,11 +18,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from neoslam.config import KeyframeConfig
-from neoslam.geometry import transform_points
 from neoslam.io.frames import camera_points_to_robot
 from neoslam.types import Keyframe, ObjectObservation
 
-__all__ = ["LocalObjectWindow", "KeyframeBuilder", "footprint_radii", "object_centres"]
+__all__ = ["LocalObjectWindow", "KeyframeBuilder", "footprint_radii", "object_centres", "view_covariances"]
 
 # The latest views the window can give back (retract): a moving object is found within a track's views (a few
 # dozen), and this bounds the record when the robot stands and the window forgets nothing.
@@ -60,6 +59,16 @@ def object_centres(
     return shifted
 
 
+def view_covariances(rays: np.ndarray, relative_depth_sigma: np.ndarray, bearing_sigma: float) -> np.ndarray:
+    """(n, 2, 2) ground-plane covariance of single stereo views of points at `rays` (n, 2) from the camera (world
+    axes): along the ray the depth error, which scales the whole ray (std `relative_depth_sigma` x its length);
+    across it the bearing error (std `bearing_sigma` rad x the length)."""
+    length2 = np.maximum((rays**2).sum(axis=1), 1e-12)
+    along = rays[:, :, None] * rays[:, None, :]  # r rᵀ: the ray direction times the length squared
+    across = length2[:, None, None] * np.eye(2) - along  # (|r|² I - r rᵀ): the perpendicular, times the same
+    return relative_depth_sigma[:, None, None] ** 2 * along + bearing_sigma**2 * across
+
+
 @dataclass
 class _WindowObject:
     label: str
@@ -69,10 +78,17 @@ class _WindowObject:
     observations: int
     last_seen_m: float  # odometer reading of the last observation
     settled: int = 0  # views whose track the motion detector found static (LocalObjectWindow.settle)
+    # sum over views of weight² x the view's ground-plane covariance: the weighted mean's covariance times weight²
+    spread: np.ndarray = field(default_factory=lambda: np.zeros((2, 2)))
 
     @property
     def position(self) -> np.ndarray:
         return self.weighted_sum / self.weight
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """(2, 2) ground-plane covariance of the position: that of a weighted mean of independent views."""
+        return self.spread / self.weight**2
 
 
 @dataclass
@@ -82,8 +98,11 @@ class LocalObjectWindow:
     config: KeyframeConfig
     marks_provisional: bool = False  # objects without a settled view are provisional in keyframes (`unjudged: wait`)
     objects: list[_WindowObject] = field(default_factory=list)
-    # id(view) -> (view, the object it joined, its weighted point, its weight), oldest first: what retract undoes.
-    _taken: dict[int, tuple[ObjectObservation, _WindowObject, np.ndarray, float]] = field(default_factory=dict)
+    # id(view) -> (view, the object it joined, its weighted point, its weight, its weighted covariance), oldest
+    # first: what retract undoes.
+    _taken: dict[int, tuple[ObjectObservation, _WindowObject, np.ndarray, float, np.ndarray]] = field(
+        default_factory=dict
+    )
     _settled: set[int] = field(default_factory=set)  # id(view) of the settled views held in _taken
 
     def add(
@@ -94,15 +113,21 @@ class LocalObjectWindow:
         joined = []
         if observations:
             measured_depth = np.array([o.center_camera[2] for o in observations])
-            world = transform_points(pose, camera_points_to_robot(self._object_centres(observations)))
+            rays = camera_points_to_robot(self._object_centres(observations)) @ pose[:3, :3].T
+            world = rays + pose[:3, 3]
             # Stereo depth error grows with the measured depth squared: weight each view by its inverse variance,
             # or by the front end's own uncertainty of the centre where it measured a larger one.
-            sigma = self.config.depth_sigma_at_1m * measured_depth**2
-            measured_sigma = np.array([o.depth_sigma or 0.0 for o in observations])
-            weights = 1.0 / np.maximum(sigma, measured_sigma) ** 2
-            for observation, point, weight in zip(observations, world, weights, strict=True):
-                joined.append(self._fuse(observation, point, float(weight), odometer_m))
-                self._taken[id(observation)] = (observation, joined[-1], weight * point, float(weight))
+            sigma = np.maximum(
+                self.config.depth_sigma_at_1m * measured_depth**2,
+                np.array([o.depth_sigma or 0.0 for o in observations]),
+            )
+            weights = 1.0 / sigma**2
+            covariances = view_covariances(rays[:, :2], sigma / measured_depth, self.config.bearing_sigma)
+            for observation, point, weight, covariance in zip(observations, world, weights, covariances, strict=True):
+                joined.append(self._fuse(observation, point, float(weight), covariance, odometer_m))
+                self._taken[id(observation)] = (
+                    observation, joined[-1], weight * point, float(weight), weight**2 * covariance
+                )  # fmt: skip
         horizon = odometer_m - self.config.window_length
         kept = [o for o in self.objects if o.last_seen_m >= horizon]
         if len(kept) < len(self.objects):
@@ -133,9 +158,10 @@ class LocalObjectWindow:
             entry = self._taken.pop(id(observation), None)
             if entry is None or entry[0] is not observation:
                 continue
-            _, joined, weighted_point, weight = entry
+            _, joined, weighted_point, weight, weighted_covariance = entry
             joined.weighted_sum -= weighted_point
             joined.weight -= weight
+            joined.spread -= weighted_covariance
             joined.patch_sum -= observation.patch
             joined.observations -= 1
             if id(observation) in self._settled:
@@ -150,7 +176,12 @@ class LocalObjectWindow:
         return object_centres(observations, self.config.footprints)
 
     def _fuse(
-        self, observation: ObjectObservation, point: np.ndarray, weight: float, odometer_m: float
+        self,
+        observation: ObjectObservation,
+        point: np.ndarray,
+        weight: float,
+        covariance: np.ndarray,
+        odometer_m: float,
     ) -> _WindowObject:
         same_label = [o for o in self.objects if o.label == observation.label]
         if same_label:
@@ -159,12 +190,19 @@ class LocalObjectWindow:
             if min(distances) <= self.config.association_radius:
                 nearest.weighted_sum += weight * point
                 nearest.weight += weight
+                nearest.spread += weight**2 * covariance
                 nearest.patch_sum += observation.patch
                 nearest.observations += 1
                 nearest.last_seen_m = odometer_m
                 return nearest
         joined = _WindowObject(
-            observation.label, weight * point, weight, observation.patch.astype(float), 1, odometer_m
+            observation.label,
+            weight * point,
+            weight,
+            observation.patch.astype(float),
+            1,
+            odometer_m,
+            spread=weight**2 * covariance,
         )
         self.objects.append(joined)
         return joined
@@ -217,6 +255,7 @@ class KeyframeBuilder:
             labels=tuple(objects[i].label for i in around),
             patches=np.array([objects[i].patch_sum / objects[i].observations for i in around]),
             provisional=np.array([objects[i].settled == 0 for i in around]) & self.window.marks_provisional,
+            covariances=np.array([objects[i].covariance for i in around]),
         )
         self._next_id += 1
         self.frames.append(frame_index)

@@ -4,16 +4,21 @@ Candidate assignments (i, i') pair a query object with a stored one of the same 
 appearance patches differ by at most the RMSE threshold. Over these candidates only, the affinity
 M_(a,b) = max(0, e_max − |e_ij − e_i'j'|) (eq. 2, 4) rewards pairs of assignments that keep the distance between
 their objects; X* = argmax Xᵀ M X (eq. 5) is approximated by spectral matching: the principal eigenvector of M,
-then a greedy discretisation that takes candidates in order of their weight and drops those in conflict.
+then a greedy discretisation that takes candidates in order of their weight and drops those in conflict. With
+`tolerances: covariance` (the default), the tolerance e_max of a pair of assignments widens to `affinity_sigmas`
+standard deviations of |e_ij − e_i'j'| where the four centres' covariances make it larger: far objects are allowed
+their depth noise, near ones keep the paper's e_max. M is then e_max · max(0, 1 − |e_ij − e_i'j'| / tolerance).
 
 Verification keeps precision: a match must be supported by other matches with consistent distances, then a
 rigid 4-DoF fit (yaw, translation) of the matched centres must explain at least `min_inliers` of them (and
-`min_inlier_ratio` of the smaller keyframe) within `inlier_distance` in the ground plane with a small RMS residual.
-The fit is also the metric constraint between the two keyframes. Most pairs of keyframes share no place: a match
-that can no longer reach the number of matches it needs is given up as soon as that shows, before or during the fit.
-Last, the fit must not be contradicted: objects of either keyframe that the fit puts well inside the other's ground
-should find an object of their label there. A street whose layout shares a regular stretch with another (cars
-parked every few metres) fits on that stretch, but the bicycles, trucks and gaps around it do not follow.
+`min_inlier_ratio` of the smaller keyframe), each within its chi-square gate, with a residual its covariances allow
+(loop.verification; `tolerances: fixed`: within `inlier_distance` in the ground plane and an RMS residual of at
+most `max_fit_residual`, whatever the objects' distances). The fit is also the metric constraint between the two
+keyframes. Most pairs of keyframes share no place: a match that can no longer reach the number of matches it needs
+is given up as soon as that shows, before or during the fit. Last, the fit must not be contradicted: objects of
+either keyframe that the fit puts well inside the other's ground should find an object of their label there. A
+street whose layout shares a regular stretch with another (cars parked every few metres) fits on that stretch, but
+the bicycles, trucks and gaps around it do not follow.
 
 Objects a keyframe holds as provisional (not known to be static yet: moving_objects.unjudged wait) are matched as
 any other and count in the share of objects a match must explain, but not as contradictions: a car that has driven
@@ -28,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from neoslam.config import MatchingConfig
-from neoslam.geometry import fit_yaw_translation, transform_points
+from neoslam.loop.verification import contradictions, evidence_bits, fit_consistent, trimmed_fit
 from neoslam.types import Keyframe
 
 __all__ = [
@@ -38,6 +43,7 @@ __all__ = [
     "principal_eigenvector",
     "spectral_matching",
     "contradictions",
+    "distance_variances",
     "match_keyframes",
 ]
 
@@ -54,6 +60,7 @@ class KeyframeMatch:
     residual_rms: float  # m, of the verified pairs under `transform`
     verified: bool
     verified_score: float  # the score over the verified pairs only; 0 when the match is not verified
+    evidence: float = 0.0  # bits that the fit shows one place (loop.verification); 0 when it got no fit
 
     @property
     def n_matches(self) -> int:
@@ -75,10 +82,30 @@ def candidate_assignments(query: Keyframe, stored: Keyframe, config: MatchingCon
     return np.argwhere(same_label & similar)
 
 
-def affinity_matrix(query: Keyframe, stored: Keyframe, candidates: np.ndarray, e_max: float) -> np.ndarray:
-    """M over the candidates (eq. 2, 4): e_max − |e_ij − e_i'j'| clipped at 0; 0 for assignments in conflict."""
+def distance_variances(keyframe: Keyframe, centre_sigma: float) -> np.ndarray:
+    """(n, n) variance of each pairwise distance e_ij (eq. 1), from the two centres' ground-plane covariances along
+    the line between them, each with `centre_sigma` added."""
+    offset = keyframe.centers[None, :, :2] - keyframe.centers[:, None, :2]
+    direction = offset / np.maximum(np.linalg.norm(offset, axis=2), 1e-9)[:, :, None]
+    along = np.einsum("nmi,mij,nmj->nm", direction, keyframe.covariances, direction)
+    return along + along.T + 2.0 * centre_sigma**2
+
+
+def affinity_matrix(
+    query: Keyframe, stored: Keyframe, candidates: np.ndarray, e_max: float, config: MatchingConfig | None = None
+) -> np.ndarray:
+    """M over the candidates (eq. 2, 4): e_max − |e_ij − e_i'j'| clipped at 0, or with `tolerances: covariance`
+    e_max · (1 − |e_ij − e_i'j'| / tolerance) clipped at 0, the tolerance at least e_max and `affinity_sigmas`
+    standard deviations of the difference; 0 for assignments in conflict. Without a config: the paper's form."""
     q, s = candidates[:, 0], candidates[:, 1]
-    affinity = np.maximum(e_max - np.abs(query.distances[np.ix_(q, q)] - stored.distances[np.ix_(s, s)]), 0.0)
+    difference = np.abs(query.distances[np.ix_(q, q)] - stored.distances[np.ix_(s, s)])
+    if config is None or config.tolerances == "fixed":
+        affinity = np.maximum(e_max - difference, 0.0)
+    else:
+        variance = distance_variances(query, config.centre_sigma)[np.ix_(q, q)]
+        variance += distance_variances(stored, config.centre_sigma)[np.ix_(s, s)]
+        tolerance = np.maximum(e_max, config.affinity_sigmas * np.sqrt(variance))
+        affinity = e_max * np.maximum(1.0 - difference / tolerance, 0.0)
     conflict = (q[:, None] == q[None, :]) | (s[:, None] == s[None, :])  # one object cannot match two
     affinity[conflict] = 0.0
     return affinity
@@ -140,75 +167,25 @@ def _required_matches(query: Keyframe, stored: Keyframe, config: MatchingConfig)
     return max(config.min_inliers, 2, config.min_inlier_ratio * min(len(query.labels), len(stored.labels)))
 
 
-def _known(keyframe: Keyframe) -> np.ndarray:
-    """Bool per object: known to be static (not provisional), so a place seen again must show it."""
-    return ~keyframe.provisional
-
-
-def _horizontal_residuals(transform: np.ndarray, query: np.ndarray, stored: np.ndarray) -> np.ndarray:
-    """Distances in the ground plane: objects stand on the road at similar heights, so height carries little
-    about a place, and vertical odometry (and KITTI's ground truth in height) is the least reliable axis."""
-    return np.linalg.norm(transform_points(transform, query)[:, :2] - stored[:, :2], axis=1)
-
-
-def _fit(query: np.ndarray, stored: np.ndarray, config: MatchingConfig, needed: float) -> tuple[np.ndarray, np.ndarray]:
-    """Rigid 4-DoF fit, trimmed: drop the worst match and refit until every match is within `inlier_distance`
-    (least squares alone lets one wrong match drag the fit off all the right ones). Gives up once fewer than
-    `needed` matches are left, which can no longer be verified. Returns the transform and the inlier mask."""
-    inliers = np.ones(len(query), dtype=bool)
-    transform = np.eye(4)
-    while inliers.sum() >= needed:
-        transform = fit_yaw_translation(query[inliers], stored[inliers])
-        residual = np.where(inliers, _horizontal_residuals(transform, query, stored), -np.inf)
-        worst = int(np.argmax(residual))
-        if residual[worst] <= config.inlier_distance:
-            break
-        inliers[worst] = False
-    return transform, inliers
-
-
-def _ground(centres: np.ndarray, robot: np.ndarray) -> tuple[np.ndarray, float]:
-    """Centre and radius (ground plane) of what a keyframe covers: its current object, the one nearest the robot
-    (paper 3.2), and the farthest of its objects from it."""
-    current = centres[np.argmin(np.linalg.norm(centres[:, :2] - robot[:2], axis=1)), :2]
-    return current, float(np.linalg.norm(centres[:, :2] - current, axis=1).max())
-
-
-def _has_counterpart(points: np.ndarray, labels, others: np.ndarray, other_labels, radius: float) -> np.ndarray:
-    """Bool per point: an object of the same label stands within `radius` among the others (ground plane)."""
-    same = np.asarray(labels)[:, None] == np.asarray(other_labels)[None, :]
-    distance = np.linalg.norm(points[:, None, :2] - others[None, :, :2], axis=2)
-    return (same & (distance <= radius)).any(axis=1)
-
-
-def contradictions(query: Keyframe, stored: Keyframe, transform: np.ndarray, config: MatchingConfig) -> int:
-    """Objects of either keyframe that the fit (query world -> stored world) puts at least `contradiction_margin`
-    inside the other keyframe's ground with no object of their label within `contradiction_radius` there;
-    provisional objects (not known to be static) are not counted."""
-    moved = transform_points(transform, query.centers)
-    query_centre, query_radius = _ground(moved, (transform @ query.pose)[:3, 3])
-    stored_centre, stored_radius = _ground(stored.centers, stored.pose[:3, 3])
-    count = 0
-    for points, labels, known, others, other_labels, centre, radius in (
-        (moved, query.labels, _known(query), stored.centers, stored.labels, stored_centre, stored_radius),
-        (stored.centers, stored.labels, _known(stored), moved, query.labels, query_centre, query_radius),
-    ):
-        inside = known & (np.linalg.norm(points[:, :2] - centre, axis=1) <= radius - config.contradiction_margin)
-        labels_inside = np.asarray(labels)[inside]
-        found = _has_counterpart(points[inside], labels_inside, others, other_labels, config.contradiction_radius)
-        count += int((~found).sum())
-    return count
-
-
 def _unverified(query: Keyframe, stored: Keyframe, score: float, pairs: np.ndarray) -> KeyframeMatch:
     """A match that failed verification, with the pairs it got as far as."""
     return KeyframeMatch(query.id, stored.id, score, pairs, np.eye(4), float("inf"), False, 0.0)
 
 
-def match_keyframes(query: Keyframe, stored: Keyframe, config: MatchingConfig, e_max: float) -> KeyframeMatch:
-    """Match two keyframes and verify the result (see the module docstring)."""
+def match_keyframes(
+    query: Keyframe,
+    stored: Keyframe,
+    config: MatchingConfig,
+    e_max: float,
+    label_shares: dict[str, float] | None = None,
+    tested: int = 1,
+) -> KeyframeMatch:
+    """Match two keyframes and verify the result (see the module docstring); `label_shares`, each label's share
+    among the stored objects, weighs the evidence of a match (loop.verification.evidence_bits), and `tested`, the
+    number of stored places the query could have matched, raises the evidence needed by log2 of it: the more places
+    are compared, the likelier one of them aligns by chance."""
     candidates = candidate_assignments(query, stored, config)
-    affinity = affinity_matrix(query, stored, candidates, e_max)
+    affinity = affinity_matrix(query, stored, candidates, e_max, config)
     needed = _required_matches(query, stored, config)
     chosen = spectral_matching(affinity, candidates, config)
     score = float(affinity[np.ix_(chosen, chosen)].sum() / e_max) if len(chosen) else 0.0
@@ -216,14 +193,19 @@ def match_keyframes(query: Keyframe, stored: Keyframe, config: MatchingConfig, e
     pairs = candidates[kept]
     if len(kept) < needed or score <= config.score_threshold:
         return _unverified(query, stored, score, pairs)
-    transform, inliers = _fit(query.centers[pairs[:, 0]], stored.centers[pairs[:, 1]], config, needed)
+    fit, inliers = trimmed_fit(query, stored, pairs, config, needed)
     kept, pairs = kept[inliers], pairs[inliers]
-    if len(pairs) < needed:
+    if fit is None or len(pairs) < needed:
         return _unverified(query, stored, score, pairs)
-    residual = _horizontal_residuals(transform, query.centers[pairs[:, 0]], stored.centers[pairs[:, 1]])
-    residual_rms = float(np.sqrt(np.mean(residual**2)))
-    verified = residual_rms <= config.max_fit_residual and (
-        contradictions(query, stored, transform, config) <= config.max_contradictions
+    residual_rms = float(np.sqrt(np.mean(fit.distances**2)))
+    contradicted = contradictions(query, stored, fit.transform, config)
+    evidence = evidence_bits(query, stored, pairs, fit, contradicted, label_shares, config)
+    verified = bool(
+        fit_consistent(fit, config)
+        and contradicted <= config.max_contradictions
+        and (config.tolerances == "fixed" or evidence >= config.min_evidence_bits + np.log2(max(tested, 1)))
     )
     verified_score = float(affinity[np.ix_(kept, kept)].sum() / e_max) if verified else 0.0
-    return KeyframeMatch(query.id, stored.id, score, pairs, transform, residual_rms, verified, verified_score)
+    return KeyframeMatch(
+        query.id, stored.id, score, pairs, fit.transform, residual_rms, verified, verified_score, evidence
+    )

@@ -53,6 +53,9 @@ class MapRelocaliser(LoopClosureDetector):
     def _plausible_turn(self, match: KeyframeMatch, odometer_m: float) -> bool:
         return True  # the session's frame may be turned any way relative to the map's
 
+    def _drift_bits(self, keyframe: Keyframe, transform: np.ndarray, stored: int, odometer_m: float) -> float:
+        return 0.0  # the session's frame may lie anywhere in the map's: no prior on where the fit moves it
+
     def _closure(self, query: Keyframe, match: KeyframeMatch) -> tuple[LoopClosure, np.ndarray]:
         closure, offset = super()._closure(query, match)
         return replace(closure, relative_pose=_levelled(closure.relative_pose)), offset

@@ -48,7 +48,7 @@ __all__ = [
 ]
 
 FORMAT_TAG = "neoslam-map"
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 APPLICATION_ID = 0x4E534C4D  # "NSLM" at offset 68 of the file header, so that `file` and others can tell a map
 
 F8 = np.dtype("<f8")
@@ -73,7 +73,7 @@ TABLES: dict[str, str] = {
         "CREATE TABLE keyframes (id INTEGER PRIMARY KEY, frame INTEGER NOT NULL, experience INTEGER, "
         "pose BLOB NOT NULL, objects INTEGER NOT NULL, centers BLOB NOT NULL, labels TEXT NOT NULL, "
         "patch_height INTEGER NOT NULL, patch_width INTEGER NOT NULL, patches BLOB NOT NULL, "
-        "provisional BLOB NOT NULL)"
+        "provisional BLOB NOT NULL, covariances BLOB NOT NULL)"
     ),
     "experiences": (
         "CREATE TABLE experiences (id INTEGER PRIMARY KEY, session INTEGER NOT NULL, frame INTEGER NOT NULL, "
@@ -173,7 +173,7 @@ STATEMENTS = {
     "session": "INSERT INTO sessions (id, name, frames, relocalised_frame) VALUES (?, ?, ?, ?) ON CONFLICT (id) DO "
     "UPDATE SET name = excluded.name, frames = excluded.frames, relocalised_frame = excluded.relocalised_frame",
     "keyframe": "INSERT INTO keyframes (id, frame, experience, pose, objects, centers, labels, patch_height, "
-    "patch_width, patches, provisional) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+    "patch_width, patches, provisional, covariances) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
     "keyframe_experience": "UPDATE keyframes SET experience = ? WHERE id = ?",
     "experience": "INSERT INTO experiences (id, session, frame, grid_cell, head_direction, odometry_pose, "
     "linear_velocity, angular_velocity, keyframe) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
@@ -221,6 +221,7 @@ def keyframe_row(keyframe: Keyframe, experience: int | None) -> tuple[Any, ...]:
         int(width),
         encode(patches, U1, (n, height, width), f"keyframe {keyframe.id}'s patches"),
         encode(np.asarray(keyframe.provisional, dtype=U1), U1, (n,), f"keyframe {keyframe.id}'s provisional flags"),
+        encode(keyframe.covariances, F8, (n, 2, 2), f"keyframe {keyframe.id}'s covariances"),
     )
 
 
@@ -291,7 +292,7 @@ def read_state(connection: sqlite3.Connection) -> MapState:
 
     state = MapState()
     state.sessions = [SessionRecord(*row) for row in rows("SELECT * FROM sessions ORDER BY id")]
-    for kf_id, frame, experience, pose, n, centers, labels, height, width, patches, provisional in rows(
+    for kf_id, frame, experience, pose, n, centers, labels, height, width, patches, provisional, covariances in rows(
         "SELECT * FROM keyframes ORDER BY id"
     ):
         names = tuple(json.loads(labels))
@@ -306,6 +307,7 @@ def read_state(connection: sqlite3.Connection) -> MapState:
                 names,
                 decode(patches, U1, (n, height, width)),
                 decode(provisional, U1, (n,)).astype(bool),
+                decode(covariances, F8, (n, 2, 2)),
             )
         )
         if experience is not None:

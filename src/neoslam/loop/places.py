@@ -1,0 +1,96 @@
+"""Stored places: a stored keyframe with its neighbours of the same pass, matched as one.
+
+A keyframe holds the objects around one point of the route. Two passes of a street through a real detector see
+different subsets of its objects, and a pass driven the other way holds the objects on the other side of that point:
+a revisit keyframe and the one stored nearest to it often share fewer objects than a match needs, though the
+stored keyframes just before and after hold them. A place is the union of the stored keyframes whose robot poses
+lie within `matching.place_radius` of the candidate's, following the stored order both ways from it while they do
+(so one pass: a later pass of the same street lies elsewhere in the order). The keyframes of one pass share the
+odometry frame, which is accurate over so short a stretch, so their objects are merged in place: objects of one
+label within `keyframes.association_radius` are one, and the estimate with the smallest covariance (the most views)
+stands for it. The query stays a single keyframe: the share of objects a match must explain is taken of it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from neoslam.loop.index import StoredKeyframes
+from neoslam.types import Keyframe
+
+__all__ = ["Place", "merge_keyframes", "PlaceCache"]
+
+
+@dataclass(frozen=True)
+class Place:
+    """A candidate keyframe's place: the merged keyframe (the candidate's id and pose) and its members' ids."""
+
+    keyframe: Keyframe
+    members: tuple[int, ...]
+
+
+def merge_keyframes(keyframes: list[Keyframe], anchor: Keyframe, association_radius: float) -> Keyframe:
+    """One keyframe holding the objects of `keyframes` (one odometry frame), same-label objects within
+    `association_radius` merged into the best-known of them; id and pose of `anchor`. A merged object is
+    provisional only when every estimate of it is."""
+    centers = np.concatenate([k.centers for k in keyframes])
+    labels = np.array([label for k in keyframes for label in k.labels])
+    covariances = np.concatenate([k.covariances for k in keyframes])
+    patches = np.concatenate([k.patches for k in keyframes])
+    provisional = np.concatenate([k.provisional for k in keyframes])
+    order = np.argsort(np.trace(covariances, axis1=1, axis2=2), kind="stable")  # the best-known first
+    kept: list[int] = []
+    known: list[bool] = []
+    for i in order:
+        same = [j for j, k in enumerate(kept) if labels[k] == labels[i]]
+        distances = [np.linalg.norm(centers[kept[j], :2] - centers[i, :2]) for j in same]
+        if distances and min(distances) <= association_radius:
+            known[same[int(np.argmin(distances))]] |= not provisional[i]
+            continue
+        kept.append(int(i))
+        known.append(not provisional[i])
+    keep = np.array(kept, dtype=int)
+    return Keyframe(
+        id=anchor.id,
+        frame_index=anchor.frame_index,
+        pose=anchor.pose,
+        centers=centers[keep],
+        labels=tuple(labels[keep].tolist()),
+        patches=patches[keep],
+        provisional=~np.array(known, dtype=bool),
+        covariances=covariances[keep],
+    )
+
+
+class PlaceCache:
+    """The place of each stored keyframe, made when first asked for and kept once no later keyframe can join it
+    (while the stored keyframes are the same collection: a detector given a new index starts afresh)."""
+
+    def __init__(self, radius: float, association_radius: float) -> None:
+        self.radius = radius
+        self.association_radius = association_radius
+        self._places: dict[int, Place] = {}
+        self._of: StoredKeyframes | None = None
+
+    def place(self, stored: StoredKeyframes, slot: int) -> Place:
+        """The place of the keyframe stored `slot`-th."""
+        if stored is not self._of:
+            self._places, self._of = {}, stored
+        anchor = stored.at(slot)
+        cached = self._places.get(anchor.id)
+        if cached is not None:
+            return cached
+        first = last = slot
+        position = anchor.pose[:2, 3]
+        while first > 0 and np.linalg.norm(stored.at(first - 1).pose[:2, 3] - position) <= self.radius:
+            first -= 1
+        while last + 1 < len(stored) and np.linalg.norm(stored.at(last + 1).pose[:2, 3] - position) <= self.radius:
+            last += 1
+        members = [stored.at(i) for i in range(first, last + 1)]
+        merged = anchor if len(members) == 1 else merge_keyframes(members, anchor, self.association_radius)
+        place = Place(merged, tuple(k.id for k in members))
+        if last + 1 < len(stored):  # a keyframe beyond the place is stored: no later one can join it
+            self._places[anchor.id] = place
+        return place

@@ -1,0 +1,155 @@
+"""Retrieval by object triangles (geometric hashing): which stored keyframes share the most of a query's layout.
+
+Most street objects are cars in rows, so a keyframe's label counts and its histogram of pairwise distances look
+alike everywhere. Three objects say more: the triangle they make is fixed by the place, whatever the direction it is
+seen from. A keyframe's triangles (every three of its objects nearest its current object, sides in the ground
+plane) are hashed by their labels and their sides, sorted, each rounded to `side_bin` metres; a query looks up each
+of its triangles under the two nearest bins of every side (so that depth noise across a bin edge still finds it),
+and a stored keyframe scores the inverse document frequency of every key it shares: a triangle found in few
+keyframes counts for much, a common one (three cars a parking space apart) for little. The keys are held in one
+sorted array, with the latest keyframes in a short unsorted tail merged in now and then, so a query is a few
+vectorised searches whatever the map's size.
+"""
+
+from __future__ import annotations
+
+from itertools import combinations
+
+import numpy as np
+
+from neoslam.types import Keyframe
+
+__all__ = ["TriangleIndex", "triangle_keys"]
+
+LABEL_BITS = 6  # up to 63 labels (COCO has 80 classes; a street uses far fewer)
+SIDE_BITS = 8  # up to 255 bins a side
+MERGE_SHARE = 0.25  # the unsorted tail is merged into the sorted keys once it holds this share of them
+MIN_TAIL = 4096  # or, while the index is small, this many keys
+
+
+def _pack(labels: np.ndarray, bins: np.ndarray) -> np.ndarray:
+    """One int64 key per row of (t, 3) label codes and (t, 3) side bins."""
+    key = np.zeros(len(labels), dtype=np.int64)
+    for column in range(3):
+        key = (key << LABEL_BITS) | labels[:, column].astype(np.int64)
+    for column in range(3):
+        key = (key << SIDE_BITS) | bins[:, column].astype(np.int64)
+    return key
+
+
+def _triangles(
+    keyframe: Keyframe, codes: np.ndarray, max_objects: int, max_side: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(t, 3) label codes and (t, 3) sides (m) of the keyframe's triangles, each ordered by its sides, shortest
+    first, each label that of the vertex opposite its side."""
+    centres = keyframe.centers[:, :2]
+    current = np.argmin(np.linalg.norm(centres - keyframe.pose[:2, 3], axis=1)) if len(centres) else 0
+    nearest = np.argsort(np.linalg.norm(centres - centres[current], axis=1), kind="stable")[:max_objects]
+    if len(nearest) < 3:
+        return np.zeros((0, 3), dtype=np.int64), np.zeros((0, 3))
+    triples = np.array(list(combinations(nearest, 3)))
+    points = centres[triples]  # (t, 3, 2)
+    sides = np.linalg.norm(points[:, [1, 2, 0]] - points[:, [2, 0, 1]], axis=2)  # side opposite each vertex
+    order = np.argsort(sides, axis=1, kind="stable")
+    sides = np.take_along_axis(sides, order, axis=1)
+    labels = np.take_along_axis(codes[triples], order, axis=1)
+    keep = sides[:, 2] <= max_side
+    return labels[keep], sides[keep]
+
+
+def triangle_keys(
+    keyframe: Keyframe, codes: np.ndarray, side_bin: float, max_objects: int, max_side: float, spread: bool
+) -> np.ndarray:
+    """The unique keys of a keyframe's triangles (`codes`: a label code per object); `spread`: each side also under
+    its nearer neighbouring bin (a query's keys), else its own bin only (a stored keyframe's)."""
+    labels, sides = _triangles(keyframe, codes, max_objects, max_side)
+    scaled = sides / side_bin
+    bins = np.floor(scaled).astype(np.int64)
+    if not spread:
+        return np.unique(_pack(labels, np.minimum(bins, 2**SIDE_BITS - 1)))
+    neighbour = np.where(scaled - bins >= 0.5, bins + 1, bins - 1)
+    keys = []
+    for choice in range(8):  # each side in its own bin or its nearer neighbour
+        pick = [(choice >> column) & 1 for column in range(3)]
+        chosen = np.column_stack([neighbour[:, c] if pick[c] else bins[:, c] for c in range(3)])
+        valid = (chosen >= 0).all(axis=1) & (chosen < 2**SIDE_BITS).all(axis=1)
+        keys.append(_pack(labels[valid], chosen[valid]))
+    return np.unique(np.concatenate(keys)) if keys else np.zeros(0, dtype=np.int64)
+
+
+class TriangleIndex:
+    """Triangle keys of stored keyframes (by slot, in the order stored) and their scores against a query."""
+
+    def __init__(self, side_bin: float, max_objects: int, max_side: float) -> None:
+        self.side_bin, self.max_objects, self.max_side = side_bin, max_objects, max_side
+        self._codes: dict[str, int] = {}
+        self._keys = np.zeros(0, dtype=np.int64)  # sorted
+        self._slots = np.zeros(0, dtype=np.int32)
+        self._tail_keys: list[np.ndarray] = []
+        self._tail_slots: list[np.ndarray] = []
+        self._tail_size = 0
+        self._key_counts = np.zeros(256)  # per slot: its number of keys (grown by doubling)
+        self._stored = 0
+
+    def __len__(self) -> int:
+        return self._stored
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held by the keys, bytes."""
+        return int(self._keys.nbytes + self._slots.nbytes + sum(a.nbytes for a in self._tail_keys) * 1.5)
+
+    def _label_codes(self, labels: tuple[str, ...], add: bool) -> np.ndarray:
+        for label in labels if add else ():
+            self._codes.setdefault(label, min(len(self._codes) + 1, 2**LABEL_BITS - 1))
+        return np.array([self._codes.get(label, 0) for label in labels], dtype=np.int64)
+
+    def add(self, keyframe: Keyframe) -> None:
+        """Store the next keyframe's keys (its slot is the number stored before it)."""
+        codes = self._label_codes(keyframe.labels, add=True)
+        keys = triangle_keys(keyframe, codes, self.side_bin, self.max_objects, self.max_side, spread=False)
+        self._tail_keys.append(keys)
+        self._tail_slots.append(np.full(len(keys), self._stored, dtype=np.int32))
+        self._tail_size += len(keys)
+        if self._stored == len(self._key_counts):
+            self._key_counts = np.concatenate([self._key_counts, np.zeros_like(self._key_counts)])
+        self._key_counts[self._stored] = len(keys)
+        self._stored += 1
+        if self._tail_size >= max(MIN_TAIL, MERGE_SHARE * len(self._keys)):
+            self._merge()
+
+    def _merge(self) -> None:
+        keys = np.concatenate([self._keys, *self._tail_keys])
+        slots = np.concatenate([self._slots, *self._tail_slots])
+        order = np.argsort(keys, kind="stable")
+        self._keys, self._slots = keys[order], slots[order]
+        self._tail_keys, self._tail_slots, self._tail_size = [], [], 0
+
+    def scores(self, query: Keyframe) -> np.ndarray:
+        """Per stored slot, the summed inverse document frequency of the keys it shares with the query, over the
+        square root of its number of keys (a keyframe of many objects shares more by chance)."""
+        stored = self._stored
+        scores = np.zeros(stored)
+        if not stored:
+            return scores
+        codes = self._label_codes(query.labels, add=False)
+        keys = triangle_keys(query, codes, self.side_bin, self.max_objects, self.max_side, spread=True)
+        low = np.searchsorted(self._keys, keys, side="left")
+        high = np.searchsorted(self._keys, keys, side="right")
+        tail_keys = np.concatenate(self._tail_keys) if self._tail_keys else np.zeros(0, dtype=np.int64)
+        tail_slots = np.concatenate(self._tail_slots) if self._tail_slots else np.zeros(0, dtype=np.int32)
+        sorted_tail = np.sort(tail_keys)
+        in_tail = np.searchsorted(sorted_tail, keys, side="right") - np.searchsorted(sorted_tail, keys, side="left")
+        frequency = high - low + in_tail
+        found = frequency > 0
+        idf = np.log((stored + 1.0) / (frequency[found] + 0.5))
+        counts = (high - low)[found]
+        starts = low[found]
+        # every posting of every found key: the runs [low, high) laid end to end
+        runs = np.repeat(starts - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts) + np.arange(counts.sum())
+        np.add.at(scores, self._slots[runs], np.repeat(idf, counts))
+        if len(tail_keys):
+            weight = dict(zip(keys[found].tolist(), idf.tolist(), strict=True))
+            hit = np.isin(tail_keys, keys[found])
+            np.add.at(scores, tail_slots[hit], [weight[k] for k in tail_keys[hit].tolist()])
+        return scores / np.sqrt(np.maximum(self._key_counts[:stored], 1.0))

@@ -1,0 +1,81 @@
+"""Stored places: neighbouring keyframes of one pass merged into one keyframe."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from neoslam.geometry import make_pose
+from neoslam.loop.index import StoredKeyframes
+from neoslam.loop.places import PlaceCache, merge_keyframes
+from neoslam.types import Keyframe
+
+
+def _keyframe(id: int, x: float, centres, labels, spread: float = 0.1, provisional=None) -> Keyframe:
+    centres = np.asarray(centres, dtype=float)
+    n = len(centres)
+    return Keyframe(
+        id=id,
+        frame_index=10 * id,
+        pose=make_pose(np.eye(3), np.array([x, 0.0, 1.65])),
+        centers=centres,
+        labels=tuple(labels),
+        patches=np.full((n, 16, 16), 100 + id, np.uint8),
+        provisional=provisional,
+        covariances=np.tile(np.eye(2) * spread, (n, 1, 1)),
+    )
+
+
+def test_the_same_object_in_two_keyframes_is_one_the_best_known_estimate() -> None:
+    first = _keyframe(0, 0.0, [[5.0, 5.0, 0.0], [10.0, -5.0, 0.0]], ["car", "car"], spread=0.5)
+    second = _keyframe(1, 5.0, [[5.8, 5.1, 0.0], [10.3, -5.0, 0.0], [20.0, 5.0, 0.0]], ["car", "truck", "car"], 0.2)
+    merged = merge_keyframes([first, second], second, association_radius=2.5)
+    # The cars at (5, 5) are one object, held at the second keyframe's (better known) estimate; the truck beside
+    # the car at (10, -5) is another object (labels differ); the car at (20, 5) is new.
+    assert merged.id == 1 and np.array_equal(merged.pose, second.pose)
+    order = np.lexsort((merged.labels, merged.centers[:, 0]))
+    np.testing.assert_allclose(merged.centers[order, :2], [[5.8, 5.1], [10.0, -5.0], [10.3, -5.0], [20.0, 5.0]])
+    assert [merged.labels[i] for i in order] == ["car", "car", "truck", "car"]
+    np.testing.assert_allclose(merged.covariances[order[0]], np.eye(2) * 0.2)
+    assert merged.patches[order[0]].mean() == 101 and merged.patches[order[1]].mean() == 100
+
+
+def test_a_merged_object_is_provisional_only_when_every_estimate_is() -> None:
+    first = _keyframe(0, 0.0, [[5.0, 5.0, 0.0], [15.0, 5.0, 0.0]], ["car", "car"], provisional=[True, True])
+    second = _keyframe(1, 5.0, [[5.2, 5.0, 0.0], [15.2, 5.0, 0.0]], ["car", "car"], provisional=[False, True])
+    merged = merge_keyframes([first, second], second, association_radius=2.5)
+    order = np.argsort(merged.centers[:, 0])
+    assert merged.provisional[order].tolist() == [False, True]
+
+
+def _stored(xs) -> StoredKeyframes:
+    stored = StoredKeyframes()
+    for i, x in enumerate(xs):
+        stored.append(_keyframe(i, x, [[x, 5.0, 0.0]], ["car"]))
+    return stored
+
+
+def test_a_place_is_the_keyframes_of_its_pass_within_the_radius() -> None:
+    # A pass every 5 m from 0 to 50, then a second pass of the same street from 0 again: the stored order steps
+    # back by 50 m between them.
+    stored = _stored([*np.arange(0.0, 51.0, 5.0), *np.arange(0.0, 31.0, 5.0)])
+    cache = PlaceCache(radius=12.0, association_radius=2.5)
+    place = cache.place(stored, 4)  # x = 20 on the first pass
+    assert place.members == (2, 3, 4, 5, 6)
+    assert len(place.keyframe.labels) == 5 and place.keyframe.id == 4
+    end = cache.place(stored, 10)  # x = 50, the last of the first pass: the second pass starts far from it
+    assert end.members == (8, 9, 10)
+    start = cache.place(stored, 11)  # x = 0 on the second pass: the first pass ended 50 m away
+    assert start.members == (11, 12, 13)
+    alone = PlaceCache(radius=0.0, association_radius=2.5).place(stored, 4)
+    assert alone.members == (4,) and alone.keyframe is stored.at(4)
+
+
+def test_a_place_is_kept_once_no_later_keyframe_can_join_it() -> None:
+    stored = _stored(np.arange(0.0, 21.0, 5.0))
+    cache = PlaceCache(radius=12.0, association_radius=2.5)
+    last = cache.place(stored, 4)  # the newest keyframe: the next one may join it
+    assert last.members == (2, 3, 4)
+    stored.append(_keyframe(5, 25.0, [[25.0, 5.0, 0.0]], ["car"]))
+    assert cache.place(stored, 4).members == (2, 3, 4, 5)
+    inner = cache.place(stored, 2)
+    assert cache.place(stored, 2) is inner  # made once
