@@ -101,16 +101,20 @@ def _match_stage(detector: LoopClosureDetector, query: Keyframe, place: Keyframe
     return "verifies"
 
 
-def _places_tried(detector: LoopClosureDetector, query: Keyframe, eligible: np.ndarray) -> list[tuple[int, ...]]:
-    """The members of each place the detector tries for a query, in its order, as far as RANKED_PLACES places."""
+def _places_tried(
+    detector: LoopClosureDetector, query: Keyframe, eligible: np.ndarray
+) -> list[tuple[tuple[int, ...], bool]]:
+    """The members of each place the detector comes to for a query, in its order, as far as RANKED_PLACES places,
+    and whether it matches it (not when none of its keyframes shares enough triangles with the query)."""
     tried: set[int] = set()
     places = []
-    for candidate in detector._ordered_candidates(query, eligible):
+    minimum = detector.config.min_shared_triangles
+    for candidate, shared in detector._ordered_candidates(query, eligible):
         if candidate in tried:
             continue
         members = detector._place(candidate).members
         tried.update(members)
-        places.append(members)
+        places.append((members, shared is None or max(shared[detector.index.slot(m)] for m in members) >= minimum))
         if len(places) == RANKED_PLACES:
             break
     return places
@@ -121,8 +125,9 @@ def _classify(
 ) -> tuple[str, int]:
     """The class of a missed revisit keyframe, and its true place's retrieval rank."""
     eligible = detector.index.eligible(keyframe.pose[:3, 3], odometer)
-    places = _places_tried(detector, keyframe, eligible)
-    rank = next((i for i, members in enumerate(places) if true_id in members), -1)
+    places = _places_tried(detector, detector._query_window(keyframe), eligible)
+    rank = next((i for i, (members, _) in enumerate(places) if true_id in members), -1)
+    matched = rank >= 0 and places[rank][1]
     if found is not None:
         match_frame = found.closure.match_frame
         right = (
@@ -130,7 +135,7 @@ def _classify(
             <= LoopCriteria().max_distance_m
         )
         return ("relocalised alone" if right else "relocalised elsewhere"), rank
-    if not 0 <= rank < detector.config.candidates:
+    if not (0 <= rank < detector.config.candidates and matched):
         return "not retrieved", rank
     query = detector._query_window(keyframe)
     place = detector._place(true_id)

@@ -10,9 +10,11 @@
     the last two checks of the verification (contradicted objects, heading drift), whose closures show what those
     checks see: contradicted objects and the heading drift of the fit, of true and of false closures. Revisit
     keyframes left without a true closure are sorted by why (`_loop_misses.py`).
-(b) Speed: median query time (retrieval + matching + verification) with 100 ... 5,000 keyframes stored, built by
-    tiling the keyframes of a simulated KITTI 00 drive over a larger area; revisits and new places apart, and at
-    the largest map also with the exact eigenvector (power iteration run to 1e-9, at most 100 products).
+(b) Speed: median query time (retrieval + matching + verification) with 100 ... 20,000 keyframes stored, built by
+    laying the keyframes of the drives of (a), each in a world of its own, far apart (and again from the first when
+    all are laid); revisits and new places apart; within the drift-bounded search radius and over the whole map
+    (every stored keyframe a candidate: a later session, a lost robot); the retrieval index's memory; and at the
+    largest map also with the exact eigenvector (power iteration run to 1e-9, at most 100 products).
 
     python benchmarks/loops.py [--quick] [--seeds N ...] [--sequences 08 town ...] [--profile vo|heavy]
                                [--config FILE.yaml] [--json FILE] [--out DIR] [--workers N] [--ray ADDRESS]
@@ -31,6 +33,7 @@ import pickle
 import statistics
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -52,13 +55,14 @@ from neoslam.types import Keyframe  # noqa: E402
 
 SEQUENCES = ["00", "02", "05", "06", "08"]
 SEEDS = [1, 2, 3, 4, 5, 6]
-MAP_SIZES = [100, 500, 1000, 2000, 5000]
+MAP_SIZES = [100, 1000, 5000, 20000]
 QUICK_MAP_SIZES = [100, 1000, 5000]
 QUERIES = 200
-TILE_OFFSET_M = 1500.0  # copies of the KITTI 00 keyframes are laid this far apart
+TILE_OFFSET_M = 1500.0  # the drives of the speed benchmark are laid this far apart
 SPEC = SPECS / "loops.yaml"  # overrides: ours, paper_keyframes (e_max = 1.5 m), without_last_checks
 VARIANTS = ("ours", "paper_keyframes", "without_last_checks")
 EXACT_EIGENVECTOR = {"power_iterations": 100, "power_tolerance": 1e-9}  # the power iteration run to convergence
+WHOLE_MAP_M = 1e7  # a search radius that takes every stored keyframe
 
 
 def _every_keyframe_stored(config: NeoSLAMConfig) -> NeoSLAMConfig:
@@ -169,16 +173,18 @@ def _accuracy_of(config: NeoSLAMConfig, data: Path) -> dict:
     }
 
 
-def _tiled(keyframes: list[Keyframe], copies: int) -> list[tuple[Keyframe, float]]:
-    """Copies of a drive's keyframes shifted far apart, with odometer readings as if driven one after another."""
+def _tiled(drives: list[list[Keyframe]], size: int) -> list[tuple[Keyframe, float]]:
+    """`size` keyframes from the drives' keyframes, each drive (in turn, again from the first when all are laid)
+    shifted far from the others, with odometer readings as if driven one after another."""
     spacing = 5.0
-    tiled = []
-    for copy in range(copies):
+    tiled: list[tuple[Keyframe, float]] = []
+    copy = 0
+    while len(tiled) < size:
         shift = np.eye(4)
-        shift[:2, 3] = [TILE_OFFSET_M * (copy % 4), TILE_OFFSET_M * (copy // 4)]
-        for k in keyframes:
-            moved = Keyframe(len(tiled), k.frame_index, shift @ k.pose, k.centers + shift[:3, 3], k.labels, k.patches)
-            tiled.append((moved, spacing * len(tiled)))
+        shift[:2, 3] = [TILE_OFFSET_M * (copy % 8), TILE_OFFSET_M * (copy // 8)]
+        for k in drives[copy % len(drives)][: size - len(tiled)]:
+            tiled.append((replace(k.moved(shift), id=len(tiled)), spacing * len(tiled)))
+        copy += 1
     return tiled
 
 
@@ -187,13 +193,19 @@ def _scrambled(keyframe: Keyframe, rng: np.random.Generator) -> Keyframe:
     angle = rng.uniform(0, 2 * np.pi, len(keyframe.labels))
     radius = rng.uniform(3.0, 10.0, len(keyframe.labels))
     moved = keyframe.centers + np.column_stack([radius * np.cos(angle), radius * np.sin(angle), 0 * angle])
-    return Keyframe(keyframe.id, keyframe.frame_index, keyframe.pose, moved, keyframe.labels, keyframe.patches)
+    return replace(keyframe, centers=moved)
 
 
-def _speed_row(matching: MatchingConfig, stream: list[tuple[Keyframe, float]], size: int, queries: int) -> dict:
+def _speed_row(
+    matching: MatchingConfig, stream: list[tuple[Keyframe, float]], size: int, queries: int, scope: str
+) -> dict:
     """Median times of `queries` revisits and as many new places against the first `size` keyframes of the stream
-    (the same queries for the same size, whatever the matching setting)."""
+    (the same queries for the same size, whatever the matching setting); `scope` "drift-bounded" (the search radius
+    round the estimate) or "whole map" (every stored keyframe a candidate, as a later session or a lost robot
+    searches). Also the memory of the detector's retrieval index."""
     config = load_config(environ={})
+    if scope == "whole map":
+        matching = matching.model_copy(update={"search_radius": WHOLE_MAP_M})
     detector = LoopClosureDetector(config.keyframes, matching)
     for keyframe, odometer in stream[:size]:
         detector.add(keyframe, odometer)
@@ -210,6 +222,7 @@ def _speed_row(matching: MatchingConfig, stream: list[tuple[Keyframe, float]], s
             times[kind].append(time.perf_counter() - start)
         eligible.append(len(detector.index.eligible(keyframe.pose[:3, 3], odometer_now)))
     return {
+        "scope": scope,
         "map_size": size,
         "queries": queries,
         "eligible_median": int(np.median(eligible)),
@@ -217,16 +230,22 @@ def _speed_row(matching: MatchingConfig, stream: list[tuple[Keyframe, float]], s
         "new_place_ms_median": 1e3 * float(np.median(times["new"])),
         "query_ms_median": 1e3 * float(np.median(times["revisit"] + times["new"])),
         "query_ms_p95": 1e3 * float(np.percentile(times["revisit"] + times["new"], 95)),
+        "index_mb": detector.index.nbytes / 1e6,
     }
 
 
-def query_speed(keyframes: list[Keyframe], sizes: list[int], queries: int) -> list[dict]:
-    """A row per map size with the default matching, then one at the largest size with the exact eigenvector."""
+def query_speed(drives: list[list[Keyframe]], sizes: list[int], queries: int) -> list[dict]:
+    """A row per map size and scope with the default matching, then one at the largest size with the exact
+    eigenvector; the map is laid from the drives' keyframes (benchmarks/loops.py (b))."""
     matching = load_config(environ={}).matching
-    stream = _tiled(keyframes, copies=int(np.ceil(max(sizes) / len(keyframes))) + 1)
-    rows = [{"eigenvector": "default", **_speed_row(matching, stream, size, queries)} for size in sizes]
+    stream = _tiled(drives, max(sizes))
+    rows = [
+        {"eigenvector": "default", **_speed_row(matching, stream, size, queries, scope)}
+        for scope in ("drift-bounded", "whole map")
+        for size in sizes
+    ]
     exact = matching.model_copy(update=EXACT_EIGENVECTOR)
-    return [*rows, {"eigenvector": "exact", **_speed_row(exact, stream, max(sizes), queries)}]
+    return [*rows, {"eigenvector": "exact", **_speed_row(exact, stream, max(sizes), queries, "drift-bounded")}]
 
 
 def _paper_note(paper: list[dict], config: NeoSLAMConfig) -> str:
@@ -333,12 +352,13 @@ def main() -> None:
         runs, paper, unchecked = (variants[name] for name in VARIANTS)
         if not (runs and paper and unchecked):
             sys.exit("loops.py: a variant has no drive that ran (the errors above; tracebacks in the cells' error.txt)")
-        first = next((r for r in runs if r["sequence"] == "00"), runs[0])
-        with (first["_folder"] / "results" / "keyframes.pkl").open("rb") as handle:
-            keyframes_00 = pickle.load(handle)
+        drives = []
+        for run in runs:
+            with (run["_folder"] / "results" / "keyframes.pkl").open("rb") as handle:
+                drives.append(pickle.load(handle))
         sweep_summary = sweep.summary
     sizes = QUICK_MAP_SIZES if args.quick else MAP_SIZES
-    speed = query_speed(keyframes_00, sizes, QUERIES // 4 if args.quick else QUERIES)
+    speed = query_speed(drives, sizes, QUERIES // 4 if args.quick else QUERIES)
     columns = ["sequence", "seed", "keyframes", "revisit_keyframes", "accepted", "false_positive", "precision",
                "recall", "f1", "recall_at_full_precision", "precision_3d", "query_ms_median"]  # fmt: skip
     public = [{k: v for k, v in r.items() if not k.startswith("_")} for r in runs]
@@ -371,13 +391,15 @@ def main() -> None:
     print("\nMissed revisit keyframes, by why (see benchmarks/_loop_misses.py):\n")
     print(markdown_table(misses, ["sequence", *MISS_CLASSES]))
     print("\n## (b) Query time (retrieval + matching + verification) against map size\n")
-    speed_columns = ["eigenvector", "map_size", "queries", "eligible_median", "revisit_ms_median",
-                     "new_place_ms_median", "query_ms_median", "query_ms_p95"]  # fmt: skip
+    speed_columns = ["eigenvector", "scope", "map_size", "queries", "eligible_median", "revisit_ms_median",
+                     "new_place_ms_median", "query_ms_median", "query_ms_p95", "index_mb"]  # fmt: skip
     print(markdown_table(speed, speed_columns))
     largest = next(row for row in speed if row["eigenvector"] == "default" and row["map_size"] == max(sizes))
+    whole = next(row for row in speed if row["scope"] == "whole map" and row["map_size"] == max(sizes))
     print(
         f"\nAt {largest['map_size']} keyframes: median {largest['query_ms_median']:.2f} ms, new places "
-        f"{largest['new_place_ms_median']:.2f} ms, revisits {largest['revisit_ms_median']:.2f} ms."
+        f"{largest['new_place_ms_median']:.2f} ms, revisits {largest['revisit_ms_median']:.2f} ms; searching the "
+        f"whole map: median {whole['query_ms_median']:.2f} ms; retrieval index {whole['index_mb']:.1f} MB."
     )
     print("\n" + sweep_summary.replace("# Sweep", "Sweep", 1))
     write_json(

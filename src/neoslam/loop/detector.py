@@ -94,19 +94,22 @@ class LoopClosureDetector:
         )
         return closure, relative[:3, 3]
 
-    def _ordered_candidates(self, keyframe: Keyframe, eligible: np.ndarray) -> Iterator[int]:
-        """Retrieval candidates, best first; when the previous keyframe relocalised, first the stored keyframes next
-        to its match: a place driven a third time then relocalises against one earlier pass, whose frame (and drift)
-        the consistency test compares, rather than hopping between passes."""
+    def _ordered_candidates(self, keyframe: Keyframe, eligible: np.ndarray) -> Iterator[tuple[int, np.ndarray | None]]:
+        """Retrieval candidates, best first, with the triangle keys every stored keyframe (by slot) shares with the
+        query (None: not known); when the previous keyframe relocalised, first the stored keyframes next to its
+        match: a place driven a third time then relocalises against one earlier pass, whose frame (and drift) the
+        consistency test compares, rather than hopping between passes."""
         previous = self._recent[-1] if self._recent else None
         preferred: list[int] = []
         if previous is not None and previous.keyframe_id == keyframe.id - 1:
             near = previous.closure.match_keyframe + np.arange(-PASS_NEIGHBOURS, PASS_NEIGHBOURS + 1)
             preferred = [int(c) for c in near[np.isin(near, eligible)]]
-        yield from preferred
-        for candidate in self.index.ranked(keyframe, eligible):
+        ranked, shared = self.index.ranked(keyframe, eligible)
+        for candidate in preferred:
+            yield candidate, None
+        for candidate in ranked:
             if int(candidate) not in preferred:
-                yield int(candidate)
+                yield int(candidate), shared
 
     def relocalise(self, keyframe: Keyframe, odometer_m: float) -> _Relocalisation | None:
         """The verified place match with the most evidence among the retrieval candidates (each tried once as a
@@ -120,7 +123,7 @@ class LoopClosureDetector:
         found: list[_Relocalisation] = []
         tried: set[int] = set()
         places = 0
-        for candidate in self._ordered_candidates(keyframe, eligible):
+        for candidate, shared in self._ordered_candidates(query, eligible):
             if places == self.config.candidates:
                 break
             if candidate in tried:
@@ -128,6 +131,10 @@ class LoopClosureDetector:
             place = self._place(candidate)
             tried.update(place.members)
             places += 1
+            if shared is not None and max(shared[self.index.slot(m)] for m in place.members) < (
+                self.config.min_shared_triangles
+            ):
+                continue  # not one of its triangles: it cannot hold the query's place
             relocalisation = self._relocalisation(query, place, eligible_ids, odometer_m)
             if relocalisation is not None:
                 found.append(relocalisation)

@@ -131,20 +131,21 @@ class KeyframeIndex:
         near = np.linalg.norm(self._positions[:n] - position[:2], axis=1) <= radius
         return self._ids[:n][near & (travelled >= self.config.exclude_recent_distance)]
 
-    def ranked(self, query: Keyframe, eligible: np.ndarray) -> np.ndarray:
+    def ranked(self, query: Keyframe, eligible: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """The eligible ids (increasing), most alike to the query first: by shared triangles (`retrieval:
-        triangles`, loop.triangles), or by signature."""
+        triangles`, loop.triangles), or by signature; and with triangles, the number of triangle keys every stored
+        keyframe (by slot) shares with the query."""
         slots = self._slots_of(eligible)
         if self.config.retrieval == "triangles":
-            similarity = self._triangles.scores(query)[slots]
-        else:
-            similarity = self._signatures[slots] @ signature(query)
-        return eligible[np.argsort(-similarity, kind="stable")]
+            scores, shared = self._triangles.scores(query)
+            return eligible[np.argsort(-scores[slots], kind="stable")], shared
+        similarity = self._signatures[slots] @ signature(query)
+        return eligible[np.argsort(-similarity, kind="stable")], None
 
     def candidates(self, query: Keyframe, odometer_m: float) -> np.ndarray:
         """Ids of the best `candidates` eligible keyframes, best first."""
         eligible = self.eligible(query.pose[:3, 3], odometer_m)
-        return self.ranked(query, eligible)[: self.config.candidates]
+        return self.ranked(query, eligible)[0][: self.config.candidates]
 
     @property
     def nbytes(self) -> int:

@@ -41,16 +41,19 @@ def merge_keyframes(keyframes: list[Keyframe], anchor: Keyframe, association_rad
     patches = np.concatenate([k.patches for k in keyframes])
     provisional = np.concatenate([k.provisional for k in keyframes])
     order = np.argsort(np.trace(covariances, axis1=1, axis2=2), kind="stable")  # the best-known first
+    distance = np.linalg.norm(centers[:, None, :2] - centers[None, :, :2], axis=2)
+    distance[labels[:, None] != labels[None, :]] = np.inf  # objects of two labels are never one
+    standing = np.zeros(len(labels), dtype=bool)  # the objects kept so far
+    known = ~provisional.copy()
     kept: list[int] = []
-    known: list[bool] = []
     for i in order:
-        same = [j for j, k in enumerate(kept) if labels[k] == labels[i]]
-        distances = [np.linalg.norm(centers[kept[j], :2] - centers[i, :2]) for j in same]
-        if distances and min(distances) <= association_radius:
-            known[same[int(np.argmin(distances))]] |= not provisional[i]
+        near = np.where(standing, distance[i], np.inf)
+        j = int(np.argmin(near))
+        if near[j] <= association_radius:
+            known[j] |= not provisional[i]
             continue
+        standing[i] = True
         kept.append(int(i))
-        known.append(not provisional[i])
     keep = np.array(kept, dtype=int)
     return Keyframe(
         id=anchor.id,
@@ -59,7 +62,7 @@ def merge_keyframes(keyframes: list[Keyframe], anchor: Keyframe, association_rad
         centers=centers[keep],
         labels=tuple(labels[keep].tolist()),
         patches=patches[keep],
-        provisional=~np.array(known, dtype=bool),
+        provisional=~known[keep],
         covariances=covariances[keep],
     )
 

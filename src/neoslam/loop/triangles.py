@@ -25,6 +25,7 @@ LABEL_BITS = 6  # up to 63 labels (COCO has 80 classes; a street uses far fewer)
 SIDE_BITS = 8  # up to 255 bins a side
 MERGE_SHARE = 0.25  # the unsorted tail is merged into the sorted keys once it holds this share of them
 MIN_TAIL = 4096  # or, while the index is small, this many keys
+MAX_TAIL = 32768  # and at most this many: a query sorts the tail (a merge costs a sort of all keys, < 1 ms per add)
 
 
 def _pack(labels: np.ndarray, bins: np.ndarray) -> np.ndarray:
@@ -115,7 +116,7 @@ class TriangleIndex:
             self._key_counts = np.concatenate([self._key_counts, np.zeros_like(self._key_counts)])
         self._key_counts[self._stored] = len(keys)
         self._stored += 1
-        if self._tail_size >= max(MIN_TAIL, MERGE_SHARE * len(self._keys)):
+        if self._tail_size >= min(max(MIN_TAIL, MERGE_SHARE * len(self._keys)), MAX_TAIL):
             self._merge()
 
     def _merge(self) -> None:
@@ -125,13 +126,13 @@ class TriangleIndex:
         self._keys, self._slots = keys[order], slots[order]
         self._tail_keys, self._tail_slots, self._tail_size = [], [], 0
 
-    def scores(self, query: Keyframe) -> np.ndarray:
-        """Per stored slot, the summed inverse document frequency of the keys it shares with the query, over the
-        square root of its number of keys (a keyframe of many objects shares more by chance)."""
+    def scores(self, query: Keyframe) -> tuple[np.ndarray, np.ndarray]:
+        """Per stored slot: the summed inverse document frequency of the keys it shares with the query, over the
+        square root of its number of keys (a keyframe of many objects shares more by chance); and the number of
+        keys it shares."""
         stored = self._stored
-        scores = np.zeros(stored)
         if not stored:
-            return scores
+            return np.zeros(0), np.zeros(0)
         codes = self._label_codes(query.labels, add=False)
         keys = triangle_keys(query, codes, self.side_bin, self.max_objects, self.max_side, spread=True)
         low = np.searchsorted(self._keys, keys, side="left")
@@ -140,16 +141,16 @@ class TriangleIndex:
         tail_slots = np.concatenate(self._tail_slots) if self._tail_slots else np.zeros(0, dtype=np.int32)
         sorted_tail = np.sort(tail_keys)
         in_tail = np.searchsorted(sorted_tail, keys, side="right") - np.searchsorted(sorted_tail, keys, side="left")
-        frequency = high - low + in_tail
-        found = frequency > 0
-        idf = np.log((stored + 1.0) / (frequency[found] + 0.5))
-        counts = (high - low)[found]
-        starts = low[found]
+        found = high - low + in_tail > 0
+        keys, idf = keys[found], np.log((stored + 1.0) / ((high - low + in_tail)[found] + 0.5))
+        counts, starts = (high - low)[found], low[found]
         # every posting of every found key: the runs [low, high) laid end to end
         runs = np.repeat(starts - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts) + np.arange(counts.sum())
-        np.add.at(scores, self._slots[runs], np.repeat(idf, counts))
-        if len(tail_keys):
-            weight = dict(zip(keys[found].tolist(), idf.tolist(), strict=True))
-            hit = np.isin(tail_keys, keys[found])
-            np.add.at(scores, tail_slots[hit], [weight[k] for k in tail_keys[hit].tolist()])
-        return scores / np.sqrt(np.maximum(self._key_counts[:stored], 1.0))
+        slots, weights = self._slots[runs], np.repeat(idf, counts)
+        if len(tail_keys) and len(keys):  # keys are sorted and unique (triangle_keys)
+            position = np.minimum(np.searchsorted(keys, tail_keys), len(keys) - 1)
+            hit = keys[position] == tail_keys
+            slots, weights = np.concatenate([slots, tail_slots[hit]]), np.concatenate([weights, idf[position[hit]]])
+        shared = np.bincount(slots, minlength=stored).astype(float)
+        scores = np.bincount(slots, weights=weights, minlength=stored)
+        return scores / np.sqrt(np.maximum(self._key_counts[:stored], 1.0)), shared
