@@ -30,8 +30,12 @@ evaluation's loop_max_distance (5 m, horizontally). Ground truth is read here fo
    the process and of the SLAM loop; the time to open and load the 05 map; the start-up of a short run with and
    without the 05 map (--localise-only), whose difference is what loading costs a run.
 
+6. A session that starts in the middle of the map: B = KITTI 05 frames 500-799 (its own noise, from the identity:
+   no prior on where it is), run into A's map of part 1 (made here when part 1 did not run): the distance B drove
+   from its first frame to its relocalisation, whether the relocalising closure is right, B's closures with A.
+
     python benchmarks/sessions.py [--quick] [--json FILE] [--seed 1] [--kills 20] [--repeats 3]
-                                  [--parts 1 2 3 4 5] [--keep DIR]
+                                  [--parts 1 2 3 4 5 6] [--keep DIR]
 
 `--quick`: B of part 1 only to frame 1599, 08 to frame 399, 5 kills, one cost run each.
 """
@@ -78,6 +82,8 @@ MAX_ATTEMPTS_PER_KILL = 3  # runs started per kill wanted, at most (a run may en
 SPLIT = 1200  # session A of KITTI 05 is frames 0 .. SPLIT-1, B the rest
 ON_STREET_M = 10.0  # a B frame this close (horizontally) to an A frame is on a street A mapped
 RELOCALISE_WITHIN_M = 30.0  # target: B relocalises within this much driving onto A's streets
+MID_MAP_FRAMES = (500, 800)  # part 6: a session of KITTI 05 that starts in the middle of A's map (frames 0-1199)
+RELOCALISE_MID_MAP_M = 40.0  # target: it relocalises within this much driving from its start
 ATE_TARGET_M = 2.0  # target: B's ATE in A's frame
 NEVER_MEET_FRAMES = 1200  # part 2: KITTI 08 frames 0 .. this-1
 CRASH_FRAMES = 800  # part 4: KITTI 05 frames 0 .. this-1
@@ -91,7 +97,7 @@ def _arguments(parser) -> None:
     parser.add_argument("--seed", type=int, default=1, help="world seed; the sessions' noise seeds follow from it")
     parser.add_argument("--kills", type=int, default=None, help=f"crash runs (default {KILLS}; --quick 5)")
     parser.add_argument("--repeats", type=int, default=None, help=f"cost runs of each kind (default {REPEATS})")
-    parser.add_argument("--parts", nargs="+", type=int, default=[1, 2, 3, 4, 5], choices=[1, 2, 3, 4, 5])
+    parser.add_argument("--parts", nargs="+", type=int, default=[1, 2, 3, 4, 5, 6], choices=[1, 2, 3, 4, 5, 6])
     parser.add_argument("--keep", type=Path, help="work in this folder and keep it (datasets, results, maps)")
 
 
@@ -404,6 +410,49 @@ def _same_part(before: dict[str, Any], after: dict[str, Any]) -> dict[str, bool]
     same_poses = before["poses"].shape == after["poses"].shape and np.array_equal(before["poses"], after["poses"])
     return {"keyframes": same_keyframes, "experiences": same_experiences, "corrected poses": same_poses,
             "links": before["links"] == after["links"]}  # fmt: skip
+
+
+def part_mid_map(setup: Setup) -> dict[str, Any]:
+    """KITTI 05 frames MID_MAP_FRAMES, a session that starts in the middle of session A's map with no prior."""
+    folder = setup.work / "p6"
+    folder.mkdir(exist_ok=True)
+    start, stop = MID_MAP_FRAMES
+    seeds = (setup.seed + 1, setup.seed + 3)  # A's noise as in part 1, B's its own
+    truth, _, (data_a, data_b) = _simulate_sessions(setup, "05", [(0, SPLIT), (start, stop)], setup.seed, seeds)
+    map_path = folder / "map.neoslam"
+    map_a = setup.work / "p1" / "map_A.neoslam"
+    if map_a.exists():
+        _copy_map(map_a, map_path)
+    else:
+        _run(data_a, folder / "RA", map_path)
+    metrics_b, _ = _run(data_b, folder / "RB", map_path)
+    session_b = _session_block(metrics_b)
+    relocalised = session_b.get("relocalised_frame")
+    xy = truth.positions[:, :2]
+    with_a = _earlier(_closures(folder / "RB"), int(session_b["id"]))
+    true_a, false_a, worst_a = _judge(with_a, lambda q: xy[start + q], lambda m: xy[m], setup.max_distance)
+    first = min(with_a, key=lambda r: int(r["query_frame"]), default=None)
+    first_right = None
+    if first is not None:
+        gap = np.linalg.norm(xy[start + int(first["query_frame"])] - xy[int(first["match_frame"])])
+        first_right = bool(gap <= setup.max_distance)
+    arc = _arc(truth.positions)
+    driven = None if relocalised is None else float(arc[start + int(relocalised)] - arc[start])
+    values = {
+        "A frames": f"0-{SPLIT - 1}",
+        "B frames (on A's streets from its first frame)": f"{start}-{stop - 1}",
+        "B relocalised at (B frame)": relocalised,
+        "driven from B's start to relocalisation m": driven,
+        "B's relocalising closure right": first_right,
+        "B closures with A (true / false)": f"{true_a} / {false_a}",
+        "B closures with A, largest true gap m": worst_a,
+    }
+    targets = {
+        "driven from B's start to relocalisation m": f"<= {RELOCALISE_MID_MAP_M:g}",
+        "B's relocalising closure right": "True",
+        "B closures with A (true / false)": "false 0",
+    }
+    return {"values": values, "targets": targets}
 
 
 def part_never_meet(setup: Setup) -> dict[str, Any]:
@@ -735,6 +784,7 @@ TITLES = {
     3: "3. Real images: kitti_06_51, then played back and forward with photometric changes",
     4: "4. Crash: SIGKILL at random moments",
     5: "5. Cost of the map file",
+    6: "6. A session that starts in the middle of the map (KITTI 05 frames 500-799 into A's map)",
 }
 
 
@@ -754,6 +804,7 @@ def main() -> None:
             3: lambda: part_real_images(setup),
             4: lambda: part_crash(setup, kills),
             5: lambda: part_cost(setup, repeats),
+            6: lambda: part_mid_map(setup),
         }
         results: dict[str, Any] = {}
         for number in sorted(args.parts):

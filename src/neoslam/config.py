@@ -1053,7 +1053,8 @@ class MapStoreConfig(_Section):
         gt=0,
         le=100_000,
         description="until a session has joined the stored map, each keyframe is matched in full against this many "
-        "stored keyframes, the best by signature over the whole map (its pose relative to the map is unknown)",
+        "stored places, the best the retrieval (matching.retrieval) ranks over the whole map (its pose relative to "
+        "the map is unknown)",
     )
     relocalisation_consecutive: int = Field(
         3,

@@ -18,6 +18,7 @@ from neoslam.loop.matching import match_keyframes
 from neoslam.pipeline import run
 from neoslam.sim.routes import ROUTES
 from neoslam.sim.simulator import simulate_route
+from neoslam.types import Keyframe
 
 KEYFRAMES = KeyframeConfig()
 MATCHING = MatchingConfig()
@@ -325,3 +326,50 @@ def test_the_town_route_is_not_fooled_by_its_repeated_layout(tmp_path: Path) -> 
     for c in closures:
         q, m = c.query_frame, c.match_frame
         assert not (source[q] and target[m]) and not (target[q] and source[m]), (q, m)
+
+
+# ------------------------------------------------------------------------------------------- ambiguity and windows
+
+
+def test_a_layout_stored_at_two_places_relocalises_nowhere(passes: TwoPasses) -> None:
+    """The street stored twice, 2 km apart (a copy: a repeated layout), every stored keyframe a candidate: a
+    revisit verifies at both places with the same evidence, so it relocalises at neither; once a closure has
+    joined the two (they are one place seen in two passes), it relocalises."""
+    wide = MATCHING.model_copy(update={"search_radius": 1e5})
+    detector = LoopClosureDetector(KEYFRAMES, wide)
+    passes.first_pass(detector)
+    copy = passes.yaw_pose(0.0, (2000.0, 0.0, 0.0))
+    for i, x in enumerate(FIRST_PASS):  # the same street stored again, elsewhere in the odometry's world
+        keyframe = passes.keyframe(passes.yaw_pose(0.0, (x, 0.0, CAMERA_HEIGHT)), copy, frame=500 + 10 * i)
+        detector.add(keyframe, 200.0 + 5.0 * i)
+    query = passes.keyframe(passes.second_pass_pose(50.0), passes.yaw_pose(DRIFT_YAW, DRIFT), 1000)
+    assert detector.relocalise(query, SECOND_PASS_ODOMETER) is None
+    detector.joined.join(_stored_at(50.0), len(FIRST_PASS) + _stored_at(50.0))
+    found = detector.relocalise(query, SECOND_PASS_ODOMETER)
+    assert found is not None and found.closure.match_keyframe in (_stored_at(50.0), len(FIRST_PASS) + _stored_at(50.0))
+
+
+def test_the_query_window_holds_what_one_sparse_keyframe_misses(passes: TwoPasses) -> None:
+    """Two consecutive second-pass keyframes that each see only three of the street's objects (a sparse detector),
+    three others each: alone neither can be matched (4 needed); the second, with the first in its query window,
+    relocalises. (The stored objects they do not see are no contradiction here: the contradiction check is tested
+    on its own.)"""
+    tolerant = MATCHING.model_copy(update={"max_contradictions": 1000, "contradiction_bits": 0.0})
+    detector = LoopClosureDetector(KEYFRAMES, tolerant)
+    passes.first_pass(detector)
+    drift = passes.yaw_pose(DRIFT_YAW, DRIFT)
+    full = [passes.keyframe(passes.second_pass_pose(x), drift, 1000 + j) for j, x in enumerate((48.0, 52.0))]
+    sparse = []
+    for keyframe, keep in zip(full, (slice(0, None, 4), slice(2, None, 4)), strict=True):
+        index = np.arange(len(keyframe.labels))[keep][:3]
+        sparse.append(
+            Keyframe(keyframe.id, keyframe.frame_index, keyframe.pose, keyframe.centers[index],
+                     tuple(keyframe.labels[i] for i in index), keyframe.patches[index])
+        )  # fmt: skip
+    alone = LoopClosureDetector(KEYFRAMES, tolerant.model_copy(update={"query_radius": 0.0}))
+    alone.index = detector.index
+    assert alone.relocalise(sparse[0], SECOND_PASS_ODOMETER) is None
+    assert alone.relocalise(sparse[1], SECOND_PASS_ODOMETER + 4.0) is None
+    assert detector.relocalise(sparse[0], SECOND_PASS_ODOMETER) is None
+    found = detector.relocalise(sparse[1], SECOND_PASS_ODOMETER + 4.0)
+    assert found is not None and found.closure.match_keyframe in (_stored_at(50.0), _stored_at(50.0) + 1)

@@ -277,3 +277,53 @@ def test_on_a_sparse_street_the_neighbourhood_grows_to_hold_more_objects() -> No
     assert keyframe is not None and sorted(keyframe.labels) == ["A", "B", "C", "G"]
     # Never beyond the sparse radius: F, 40 m from A, does not make up the numbers.
     assert KeyframeBuilder(config).add(0, _at(0.0), (seen["A"], seen["B"], seen["F"]), 0.0) is None
+
+
+# ------------------------------------------------------------------------------------------------------ covariances
+
+
+def test_a_far_view_is_uncertain_along_its_ray_and_sharp_across_it() -> None:
+    window = LocalObjectWindow(DEFAULTS)
+    window.add(_at(0.0), (_seen([40.0, 0.0, 0.0]),), odometer_m=0.0)
+    covariance = window.objects[0].covariance
+    along = DEFAULTS.depth_sigma_at_1m * 40.0**2  # the depth std of a view at 40 m, along the ray (x)
+    across = DEFAULTS.bearing_sigma * 40.0
+    np.testing.assert_allclose(covariance, np.diag([along**2, across**2]), rtol=1e-9, atol=1e-15)
+
+
+def test_a_keyframe_object_is_known_better_the_more_views_fused_it() -> None:
+    """The covariance of the weighted mean of independent views: two alike views halve the variance; a view from
+    the side is sharp where the first view was not."""
+    window = LocalObjectWindow(DEFAULTS)
+    window.add(_at(0.0), (_seen([30.0, 0.0, 0.0]),), odometer_m=0.0)
+    one = window.objects[0].covariance.copy()
+    window.add(_at(0.0), (_seen([30.0, 0.0, 0.0]),), odometer_m=0.0)
+    np.testing.assert_allclose(window.objects[0].covariance, one / 2, rtol=1e-9)
+    side = LocalObjectWindow(DEFAULTS)
+    side.add(_at(0.0), (_seen([30.0, 0.0, 0.0]),), odometer_m=0.0)
+    side.add(_at(30.0, -30.0, np.pi / 2), (_seen([30.0, 0.0, 0.0]),), odometer_m=50.0)  # the same point, seen along y
+    assert side.objects[0].covariance[0, 0] < one[0, 0] / 2
+
+
+def test_a_retracted_view_takes_its_covariance_with_it() -> None:
+    window = LocalObjectWindow(DEFAULTS)
+    first, second = _seen([30.0, 0.0, 0.0]), _seen([30.0, 0.0, 0.0])
+    window.add(_at(0.0), (first,), odometer_m=0.0)
+    one = window.objects[0].covariance.copy()
+    window.add(_at(0.0), (second,), odometer_m=0.0)
+    window.retract((second,))
+    np.testing.assert_allclose(window.objects[0].covariance, one, rtol=1e-9)
+
+
+def test_keyframes_carry_their_objects_covariances_and_move_with_them() -> None:
+    builder = KeyframeBuilder(DEFAULTS.model_copy(update={"min_objects": 2, "min_observations": 1, **FIXED_RADIUS}))
+    points = [_seen([12.0, 4.0, 0.0]), _seen([20.0, -4.0, 0.0])]
+    keyframe = builder.add(0, _at(0.0), tuple(points), travelled_m=0.0)
+    assert keyframe is not None and keyframe.covariances.shape == (2, 2, 2)
+    assert keyframe.covariances[1, 0, 0] > keyframe.covariances[0, 0, 0]  # the farther object, along its ray
+    turn = _at(100.0, 50.0, np.pi / 2)
+    moved = keyframe.moved(turn)
+    np.testing.assert_allclose(moved.centers, transform_points(turn, keyframe.centers))
+    np.testing.assert_allclose(moved.pose, turn @ keyframe.pose)
+    np.testing.assert_allclose(moved.covariances[:, 1, 1], keyframe.covariances[:, 0, 0])  # x became y
+    np.testing.assert_allclose(moved.distances, keyframe.distances)

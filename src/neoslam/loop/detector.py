@@ -116,7 +116,6 @@ class LoopClosureDetector:
         place), pinned to the member nearest to where the fit puts the robot; None when none verifies, or when
         another place, not joined to it, verifies with nearly as much evidence."""
         eligible = self.index.eligible(keyframe.pose[:3, 3], odometer_m)
-        eligible_ids = set(eligible.tolist())
         query = self._query_window(keyframe)
         if not self._queried or self._queried[-1].id != keyframe.id:
             self._queried.append(keyframe)
@@ -135,7 +134,7 @@ class LoopClosureDetector:
                 self.config.min_shared_triangles
             ):
                 continue  # not one of its triangles: it cannot hold the query's place
-            relocalisation = self._relocalisation(query, place, eligible_ids, odometer_m)
+            relocalisation = self._relocalisation(query, place, eligible, odometer_m)
             if relocalisation is not None:
                 found.append(relocalisation)
         return self._unambiguous(found)
@@ -158,12 +157,15 @@ class LoopClosureDetector:
         return merge_keyframes(members, keyframe, self.places.association_radius)
 
     def _relocalisation(
-        self, keyframe: Keyframe, place: Place, eligible: set[int], odometer_m: float
+        self, keyframe: Keyframe, place: Place, eligible: np.ndarray, odometer_m: float
     ) -> _Relocalisation | None:
         """The keyframe relocalised in one place, or None when the match fails verification or puts the robot
-        too far from the place's keyframes, off its level, or turned more than the odometry can drift."""
+        too far from the place's keyframes, off its level, or turned more than the odometry can drift; `eligible`:
+        the ids (increasing) of the stored keyframes it may close a loop with."""
         match = self._match(keyframe, place.keyframe, len(eligible))
-        members = np.array([m for m in place.members if m in eligible], dtype=int)
+        members = np.asarray(place.members, dtype=int)
+        found = np.minimum(np.searchsorted(eligible, members), max(len(eligible) - 1, 0))
+        members = members[eligible[found] == members] if len(eligible) else members[:0]
         if not match.verified or not len(members):
             return None
         nearest = self.index.nearest((match.transform @ keyframe.pose)[:3, 3], members)

@@ -3,8 +3,9 @@
 The paper compares a keyframe with all others. Here the query cost stays small as the map grows: a stored keyframe
 is a candidate only if it is not recent (`exclude_recent_distance` of travel), and lies within a search radius of
 the current estimated position that grows with the distance travelled since it was made (odometry drift bounds
-how far the estimate can be off). Candidates are ranked by a coarse signature (label histogram and histogram of
-pairwise object distances) and the best few are matched.
+how far the estimate can be off). Candidates are ranked by the object triangles they share with the query
+(`matching.retrieval: triangles`, loop.triangles) or by a coarse signature (label histogram and histogram of
+pairwise object distances), and the best few places are matched.
 
 Keyframes are named by their id everywhere (eligible, candidates, nearest, odometer): a keyframe that a closure
 recognises as a stored one is not stored again (lifelong mapping), so the stored ids need not be consecutive.

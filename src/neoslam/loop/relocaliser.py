@@ -1,9 +1,11 @@
 """Relocalisation in a stored map (beyond the paper; neoslam.store): a later session starts with no idea where it
 is relative to the map, so its keyframes are matched against the whole stored map, not within a drift-bounded
-radius. The verification is the loop-closure detector's own (the rigid fit, the place and level checks, and
-consecutive keyframes that relocalise consistently), with `map_store.relocalisation_consecutive` keyframes and no
-bound on the turn: the session's heading relative to the map is unknown too. Candidates are the stored keyframes
-most alike by signature, `map_store.relocalisation_candidates` of them.
+radius. The verification is the loop-closure detector's own (the weighted fit, the evidence of one place against
+every stored keyframe it could have matched, the place and level checks, another place as good making it
+ambiguous, and consecutive keyframes that relocalise consistently), with `map_store.relocalisation_consecutive`
+keyframes, no bound on the turn (the session's heading relative to the map is unknown too) and no drift prior (its
+position is unknown). Candidates are the `map_store.relocalisation_candidates` places the retrieval ranks first
+(`matching.retrieval`: object triangles by default).
 
 A session's frame is its first pose, tilted as the vehicle stood then, so two sessions' frames differ in roll and
 pitch too, which the fit (in yaw and translation: objects' heights say little) cannot see. A closure here therefore
@@ -29,7 +31,7 @@ __all__ = ["MapRelocaliser", "WholeMapIndex"]
 
 
 class WholeMapIndex(KeyframeIndex):
-    """Stored keyframes, every one a candidate wherever the query is (ranked by signature)."""
+    """Stored keyframes, every one a candidate wherever the query is."""
 
     def eligible(self, position: np.ndarray, odometer_m: float) -> np.ndarray:
         return self._ids[: len(self.keyframes)].copy()

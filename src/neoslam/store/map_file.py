@@ -6,7 +6,7 @@ last one), so that a killed run leaves the map up to its last committed keyframe
 `close` folds the log back and leaves one self-contained file. The same commits give the same file, byte for byte:
 nothing in it depends on the clock.
 
-Format (format_version 3; 2 lacked keyframes.covariances, 1 also keyframes.provisional). Every array is a BLOB of little-endian raw bytes: float64 (`<f8`) unless said otherwise,
+Format (format_version 3). Every array is a BLOB of little-endian raw bytes: float64 (`<f8`) unless said otherwise,
 of the shape its column fixes or its row's columns give. Ids are the map's own: keyframe, experience and object ids;
 links, closures and OVCN losses are numbered by their position in the map's lists.
 
