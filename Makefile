@@ -22,8 +22,8 @@ demo: $(STAMP)
 	$(BIN)/neoslam run --out results/demo --overwrite
 
 lint: $(STAMP)
-	$(BIN)/ruff check src tests benchmarks
-	$(BIN)/ruff format --check src tests benchmarks
+	$(BIN)/ruff check src tests benchmarks docs
+	$(BIN)/ruff format --check src tests benchmarks docs
 
 test: lint
 	$(BIN)/pytest -q

@@ -14,8 +14,9 @@ the detector would match for it is that keyframe's place (loop.places), and the 
 - matching fails: enough shared objects, but the spectral matching and its support, or the trimmed fit, keep fewer
   pairs than needed;
 - verification rejects: the fit is found, but its chi-square test, contradictions or evidence reject it;
-- place, turn or ambiguity: the match verifies, and the robot's offset from the place, the fit's turn, or another
-  place verifying as well reject it.
+- drift, place, turn or ambiguity: the match verifies, and the drift prior (the evidence less what the fit's move
+  of the robot costs), the robot's offset from the place, the fit's turn, or another place verifying as well
+  reject it.
 
 Also the retrieval rank of each revisit keyframe's true place among the places tried (0: first), and whether the
 place appears among the first `candidates`.
@@ -51,7 +52,7 @@ CLASSES = (
     "too few shared objects",
     "matching fails",
     "verification rejects",
-    "place, turn or ambiguity",
+    "drift, place, turn or ambiguity",
 )
 
 
@@ -102,7 +103,7 @@ def _match_stage(detector: LoopClosureDetector, query: Keyframe, place: Keyframe
 
 
 def _places_tried(
-    detector: LoopClosureDetector, query: Keyframe, eligible: np.ndarray
+    detector: LoopClosureDetector, query: Keyframe, eligible: np.ndarray, odometer: float
 ) -> list[tuple[tuple[int, ...], bool]]:
     """The members of each place the detector comes to for a query, in its order, as far as RANKED_PLACES places,
     and whether it matches it (not when none of its keyframes shares enough triangles with the query)."""
@@ -112,7 +113,7 @@ def _places_tried(
     for candidate, shared in detector._ordered_candidates(query, eligible):
         if candidate in tried:
             continue
-        members = detector._place(candidate).members
+        members = detector._place(candidate, odometer).members
         tried.update(members)
         places.append((members, shared is None or max(shared[detector.index.slot(m)] for m in members) >= minimum))
         if len(places) == RANKED_PLACES:
@@ -125,7 +126,7 @@ def _classify(
 ) -> tuple[str, int]:
     """The class of a missed revisit keyframe, and its true place's retrieval rank."""
     eligible = detector.index.eligible(keyframe.pose[:3, 3], odometer)
-    places = _places_tried(detector, detector._query_window(keyframe), eligible)
+    places = _places_tried(detector, detector._query_window(keyframe), eligible, odometer)
     rank = next((i for i, (members, _) in enumerate(places) if true_id in members), -1)
     matched = rank >= 0 and places[rank][1]
     if found is not None:
@@ -138,12 +139,12 @@ def _classify(
     if not (0 <= rank < detector.config.candidates and matched):
         return "not retrieved", rank
     query = detector._query_window(keyframe)
-    place = detector._place(true_id)
+    place = detector._place(true_id, odometer)
     anchor = detector.index.keyframes[true_id]
     if _shared(query, place.keyframe, anchor, truth) < _required_matches(query, place.keyframe, detector.config):
         return "too few shared objects", rank
     stage = _match_stage(detector, query, place.keyframe, len(eligible))
-    return (stage if stage != "verifies" else "place, turn or ambiguity"), rank
+    return (stage if stage != "verifies" else "drift, place, turn or ambiguity"), rank
 
 
 def replay(

@@ -633,8 +633,9 @@ def main() -> None:
     print(markdown_table(viewpoint, list(viewpoint[0])))
     fit_rows = _fit_table(real_targets, fits, 3)
     print(
-        f"\nbest grid settings (first pass, seeds {grid_seeds}): largest |sim / real - 1| over RMSE p10, median, p90 "
-        "of (a) and (b), and for the texture grid the patch mean and contrast too"
+        f"\nbest grid settings (first pass, seeds {grid_seeds}): largest deviation (the larger of sim / real and "
+        "real / sim, less 1) over RMSE p10, median, p90 of (a) and (b), and for the texture grid the patch mean and "
+        "contrast too"
     )
     print(markdown_table(fit_rows, ["grid", "setting", "largest deviation", *TARGETS]))
     fitted = settings["sim config fit"]

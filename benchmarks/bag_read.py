@@ -1,4 +1,4 @@
-"""Reading stereo frames from ROS bags against reading them from the KITTI folder (issue 14).
+"""Reading stereo frames from ROS bags against reading them from the KITTI folder.
 
 The 51 frames of kitti_06_51 are written as a ROS 1 bag and as ROS 2 bags (sqlite3 and mcap; mono8 Images, and
 one with the right camera's PNG files as CompressedImage) with the tests' writer (tests/bags/conftest.py). For each

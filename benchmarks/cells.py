@@ -1,4 +1,4 @@
-"""Speed and path-integration drift of the grid cells (36^3) and head-direction cells (36) (issue 3).
+"""Speed and path-integration drift of the grid cells (36^3) and head-direction cells (36).
 
 (a) Milliseconds per frame of one head-direction step + decode and one grid-cell step + decode, as the pipeline
     calls them, over 1,000 frames (--quick: 200) of KITTI 05 motion; and the settle alternatives measured.

@@ -1,12 +1,12 @@
-"""The whole NeoSLAM pipeline on simulated KITTI drives: issue 15's three steps, each on alone and all together.
+"""The whole NeoSLAM pipeline on simulated KITTI drives: three steps beyond the paper, each on alone and together.
 
 For each sequence, odometry noise profile, detection profile and seed: `neoslam simulate` on the real KITTI ground
 truth (a share --moving of the street's objects move: traffic in both directions, people walking), then `neoslam
-run` with the paper's relaxation, the pose graph as it was before issue 15 (`baseline`: grid-cell check, cells
-recalled on every detected closure, no motion detection, no landmarks), each step of the issue on alone over it
+run` with the paper's relaxation, the pose graph without the steps (`baseline`: grid-cell check, cells
+recalled on every detected closure, no motion detection, no landmarks), each step on alone over it
 (`moving`: moving objects kept out of keyframes and the map; `gate`: the drift gate with the cells recalled on
-accepted closures; `landmarks`: objects as landmarks in iSAM2), and the three together (`all`, today's defaults
-but for landmarks when they are off by default). Loop closures are judged within 5 m horizontally, 100 frames
+accepted closures; `landmarks`: objects as landmarks in iSAM2), and the three together (`all`, the defaults
+but for landmarks, which are off by default). Loop closures are judged within 5 m horizontally, 100 frames
 apart. The runs are one sweep, `benchmarks/specs/kitti_sim.yaml` (`neoslam sweep`; a drive's runs share its
 simulation): on a local pool, one worker per core, or on a Ray cluster (`--ray ADDRESS`); `--out DIR` keeps the
 sweep folder, and running again resumes it. Beside ATE, the translation RPE over 100 m of route
@@ -17,8 +17,8 @@ sweep folder, and running again resumes it. Beside ATE, the translation RPE over
                                    [--workers N] [--ray ADDRESS]
 
 `--detectors`: the simulator's detection profiles (default: real, the street and detector calibrated to the real
-front end on KITTI 06, and ideal, the richer street of the first benchmarks). `--moving`: share of moving objects
-(default 0.2, the issue's setting; 0 gives static streets). `--config`: the spec's `config`, a config file under
+front end on KITTI 06, and ideal, a richer street and detector). `--moving`: share of moving objects
+(default 0.2: a fifth of the objects; 0 gives static streets). `--config`: the spec's `config`, a config file under
 every run (the steps' overrides over it), e.g. `benchmarks/specs/heavy_odometry.yaml`, the motion detector told how
 noisy `heavy` odometry is.
 """
@@ -39,7 +39,7 @@ SEQUENCES = ["00", "02", "05", "06", "07", "08"]
 PROFILES = ["vo", "heavy"]
 DETECTORS = ["real", "ideal"]
 SEEDS = [1]
-MOVING = 0.2  # the issue's benchmark setting: a fifth of the street's objects move
+MOVING = 0.2  # the benchmark's setting: a fifth of the street's objects move
 SPEC = SPECS / "kitti_sim.yaml"  # overrides relaxation, baseline, moving, gate, landmarks, all
 STEPS = ["baseline", "moving", "gate", "landmarks", "all"]
 

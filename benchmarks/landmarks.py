@@ -1,4 +1,4 @@
-"""Objects as landmarks in the pose graph (iSAM2) against today's pose graph, on simulated KITTI drives.
+"""Objects as landmarks in the pose graph (iSAM2) against the pose graph without them, on simulated KITTI drives.
 
 Per sequence and detection profile (`vo` odometry, one seed): the drive is simulated once, then NeoSLAM runs it
 with `experience_map.object_landmarks` off and on (pose-graph back end). Per run: ATE (SE(3)-aligned) of the

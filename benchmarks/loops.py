@@ -103,7 +103,7 @@ def _drive(config: NeoSLAMConfig, data: Path) -> tuple[NeoSLAM, np.ndarray, list
 def _judge(slam: NeoSLAM, truth: np.ndarray, horizontal: bool) -> dict:
     frames = np.array([k.frame_index for k in slam.loop_detector.index.keyframes])
     positions = truth[:, :2] if horizontal else truth
-    # The detector's closures: the experience map's grid-cell check (issue 5) is a separate, later guard.
+    # The detector's closures: the experience map's closure gate is a separate, later guard.
     return evaluate_closures(slam.detected_closures, positions, LoopCriteria(), frames).as_dict()
 
 

@@ -1,4 +1,4 @@
-"""Odometry accuracy of the simulator's noise profiles on real KITTI trajectories (issue 2's acceptance figure).
+"""Odometry accuracy of the simulator's noise profiles on real KITTI trajectories.
 
 For each sequence, profile and seed: `neoslam simulate` (in-process) then `neoslam run`, and the odometry ATE,
 RPE and KITTI drift from metrics.json. Prints one row per run and the median over seeds.

@@ -1,4 +1,4 @@
-"""The perception front end on real KITTI frames (issues 6 and 11): detection recall against hand labels, and speed.
+"""The perception front end on real KITTI frames: detection recall against hand labels, and speed.
 
 (a) Detection. Each detector configuration runs over the hand-labelled frames (`tests/data/labels/`: frames 0, 5,
     ..., 50 of kitti_06_51 and the KITTI object pair). Recall of the labelled vehicles (cars and trucks at least
@@ -42,9 +42,9 @@ SEQUENCE = "06"
 WHOLE = DetectionPass()
 HALF = DetectionPass(scale=0.5)
 BAND = DetectionPass(rows=(0.32, 0.78), scale=1.5)  # the road band, where parked and distant cars stand
-SMALL = DetectionPass(scale=416 / 1226)  # the whole frame shrunk to YOLOX-Nano's exported 416 px (before issue 11)
+SMALL = DetectionPass(scale=416 / 1226)  # the whole frame shrunk to the 416 px YOLOX-Nano was exported for
 DETECTORS: dict[str, dict] = {
-    "YOLOX-Nano, frame at 416 px, score 0.35 (before)": {
+    "YOLOX-Nano, frame at 416 px, score 0.35 (as exported)": {
         "passes": [SMALL],
         "score_threshold": 0.35,
         "contrast_clip": 0,

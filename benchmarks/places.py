@@ -24,7 +24,8 @@ Each cell simulates a drive (`neoslam simulate`: odometry profile --profile, det
                                 [--out DIR] [--workers N] [--ray ADDRESS]
 
 Default: KITTI 00, 02, 05, 06, 08 and the town route (its repeated-layout trap), seeds 1-3, `vo`, `real`, static
-streets. The issue's figures are medians over seeds 1-6 (`--seeds 1 2 3 4 5 6`, about 50 min on 2 cores).
+streets. The documented figures (docs/benchmarks/places.md) are medians over seeds 1-6 (`--seeds 1 2 3 4 5 6`, about
+50 min on 2 cores).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""A map kept over several sessions (issue 13): relocalisation, routes that never meet, real images, crashes, cost.
+"""A map kept over several sessions: relocalisation, routes that never meet, real images, crashes, cost.
 
 Every run is `neoslam run DATA --out R --map FILE --quiet` in its own process, as a user would run it; the map files
 are read back with `neoslam.store.map_file.MapFile` and SQLite. Simulated drives: the real KITTI ground truth, `vo`

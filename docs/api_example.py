@@ -1,4 +1,4 @@
-"""Drive NeoSLAM from another program, frame by frame (the README's Python API example; tests run this file)."""
+"""Drive NeoSLAM from another program, frame by frame (the Python API page's example, docs/api.md; tests run it)."""
 
 import numpy as np
 

@@ -1,4 +1,4 @@
-"""Hostile input through the CLI (issue 12): impossible motion, absurd values, broken binary and text files, configs
+"""Hostile input through the CLI: impossible motion, absurd values, broken binary and text files, configs
 that validate but would crash, misleading messages, values accepted silently but wrong. Each case is one line
 `neoslam: error: <file>[:<line>]: <problem>` on stderr and exit code 2 (or, where the input is fine, a clean run),
 never a traceback, never a hang."""

@@ -113,6 +113,11 @@ def test_position_floor_below_a_millimetre_is_refused() -> None:
         load_config(environ={"NEOSLAM_OBJECT_MAP__POSITION_SIGMA_FLOOR": "1e-9"})
 
 
+def test_triangle_sides_beyond_the_keys_bits_are_refused() -> None:
+    with pytest.raises(ConfigError, match=r"triangle_max_side / triangle_side_bin is 500 bins"):
+        load_config(environ={"NEOSLAM_MATCHING__TRIANGLE_MAX_SIDE": "500", "NEOSLAM_MATCHING__TRIANGLE_SIDE_BIN": "1"})
+
+
 def test_environment_field_set_both_as_a_value_and_as_a_section() -> None:
     environ = {"NEOSLAM_KEYFRAMES__SPACING": "5", "NEOSLAM_KEYFRAMES__SPACING__X": "1"}
     with pytest.raises(ConfigError, match="NEOSLAM_KEYFRAMES__SPACING__X: spacing is set as a value"):

@@ -231,8 +231,8 @@ def test_default_scenario_end_to_end(tmp_path: Path) -> None:
     assert len(read_tum(out / "trajectory_tum.txt")) == frames
     assert 0.0 < metrics["ate_rmse_m"]["odometry"] < 50.0
     assert {"accepted", "true_positive", "false_positive", "precision", "recall"} <= set(metrics["loops"])
-    # What the README promises of it (measured: 11.0 m of odometry corrected to 1.7 m by 55 closures, all true):
-    # closures found, none false, and the corrected trajectory well below the odometry.
+    # What the default scenario is expected to give (measured: 11.0 m of odometry corrected to 1.7 m by 55 closures,
+    # all true): closures found, none false, and the corrected trajectory well below the odometry.
     loops = metrics["loops"]
     assert loops["accepted"] >= 20 and loops["false_positive"] == 0 and loops["precision"] == 1.0
     assert metrics["ate_rmse_m"]["corrected"] < min(3.0, 0.3 * metrics["ate_rmse_m"]["odometry"])

@@ -155,8 +155,8 @@ def test_with_the_papers_order_a_rejected_closure_recalls_nothing(monkeypatch) -
 
 
 def test_the_recall_energy_is_the_gain_times_the_cells_injection_energy(monkeypatch) -> None:
-    """At the cells' own 0.1 (NeuroSLAM's energy per frame of a re-seen view) a recall 15 cells away dies out; the
-    issue-17 measurement: the recall then changed no closure and no metre of the map."""
+    """At the cells' own 0.1 (NeuroSLAM's energy per frame of a re-seen view) a recall 15 cells away dies out; as
+    measured, such a recall changes no closure and no metre of the map."""
     weak = CONFIG.model_copy(update={"hebbian": CONFIG.hebbian.model_copy(update={"recall_gain": 1.0})})
     slam = _slam_that_stored_a_place(weak)
     _check_records(slam, monkeypatch, True)

@@ -271,8 +271,8 @@ class SimulatorConfig(_Section):
     detection_profile: str = Field(
         "real",
         description="named detection model and street (see neoslam.sim.profiles: real, calibrated to the real front "
-        "end on KITTI 06; ideal, the earlier richer model): it fills `detection` and `world`, and the fields given "
-        "there override it",
+        "end on KITTI 06; ideal, the simulator's own defaults, a richer street and detector): it fills `detection` "
+        "and `world`, and the fields given there override it",
     )
     noise_profile: str = Field("vo", description="name of the odometry noise profile (see NOISE_PROFILES)")
     odometry: OdometryNoiseConfig = OdometryNoiseConfig()
@@ -406,7 +406,7 @@ class HebbianConfig(_Section):
     recall_on: Literal["detected", "accepted"] = Field(
         "accepted",
         description="which closures recall their place: only those the experience map's closure gate accepted (the "
-        "paper's order; the default since issue 15: with closure_gate drift it meets the heavy-drift targets, and a "
+        "paper's order; the default: with closure_gate drift it meets the heavy-drift targets, and a "
         "false closure the detector accepts cannot re-anchor the cells and so open the gate for the next one: on the "
         "town trap, 5 false closures with detected, none with accepted, benchmarks/gating.py), or every one the "
         "detector accepts (NeuroSLAM's local-view calibration: the gate then compares re-anchored cells; with the "
@@ -471,6 +471,9 @@ class KeyframeConfig(_Section):
             if not (0 <= length <= 100 and 0 <= width <= 100):
                 raise ValueError(f"{label}: length and width must lie in [0, 100] m, got ({length}, {width})")
         return footprints
+
+
+TRIANGLE_SIDE_BITS = 8  # loop.triangles packs each side's bin into this many bits of a key
 
 
 class MatchingConfig(_Section):
@@ -637,6 +640,18 @@ class MatchingConfig(_Section):
     search_radius_per_metre: float = Field(
         0.1, ge=0, le=10, description="plus this share of the distance travelled since the candidate (odometry drift)"
     )
+    drift_radius: float = Field(
+        15.0,
+        gt=0,
+        le=1e5,
+        description="with tolerances covariance: how far the odometry may have drifted from a stored keyframe, m, "
+        "taken as three standard deviations by the evidence's drift prior (a fit that moves the robot by d costs "
+        "4.5 (d / R)² / ln 2 bits); the search radius only bounds which keyframes are candidates, so that opening "
+        "it to the whole map does not make a distant look-alike as likely as a near place",
+    )
+    drift_radius_per_metre: float = Field(
+        0.1, ge=0, le=10, description="plus this share of the distance travelled since the stored keyframe"
+    )
     candidates: int = Field(
         10, gt=0, le=1000, description="best retrieval candidates that are matched in full, as distinct places"
     )
@@ -687,6 +702,16 @@ class MatchingConfig(_Section):
     )
     consistent_yaw_deg: float = Field(5.0, gt=0, le=180, description="and within this yaw, degrees")
 
+    @model_validator(mode="after")
+    def _triangle_sides_fit_their_bits(self) -> MatchingConfig:
+        bins = self.triangle_max_side / self.triangle_side_bin
+        if bins >= 2**TRIANGLE_SIDE_BITS:
+            raise ValueError(
+                f"triangle_max_side / triangle_side_bin is {bins:.4g} bins; a side's bin is held in "
+                f"{TRIANGLE_SIDE_BITS} bits, so at most {2**TRIANGLE_SIDE_BITS - 1} bins fit"
+            )
+        return self
+
 
 class ExperienceMapConfig(_Section):
     """Object experience map and its correction (paper 3.6, eq. 15-18)."""
@@ -700,7 +725,7 @@ class ExperienceMapConfig(_Section):
         "cells within gc_distance_threshold of the current); drift, that check widened by gc_drift_cells_per_100m "
         "for the metres the odometry has run since the robot last knew where it was (since the stored experience "
         "was made or the last accepted closure, whichever is fewer): the cells drift with the odometry, and under "
-        "heavy drift the paper's check rejects true closures after a long loop (the default since issue 15, with "
+        "heavy drift the paper's check rejects true closures after a long loop (the default, with "
         "hebbian.recall_on accepted); none, every closure the detector accepted (benchmarks/gating.py compares them)",
     )
     gc_drift_cells_per_100m: float = Field(
@@ -996,7 +1021,7 @@ class MovingObjectsConfig(_Section):
         description="tracks whose fitted speed is below this feed the estimate, m/s: traffic is faster; a parked car "
         "30 m off seems to move about 1 m/s under the simulated `heavy` odometry (leaving out every track found "
         "moving instead left out those, and the estimate of 0.032 rad heading noise came out at 0.014-0.021). At 4.0 "
-        "slow cars raised it (simulated KITTI 05 / 06 `heavy`, all three issue-15 steps, static and 20 % moving: "
+        "slow cars raised it (simulated KITTI 05 / 06 `heavy`, all three kitti_sim.py steps, static and 20 % moving: "
         "5.50 / 2.69 / 5.71 / 8.42 m against 6.38 / 1.84 / 5.23 / 3.28 m at 2.0)",
     )
     noise_window: int = Field(1000, ge=1, le=1_000_000, description="views kept for the estimate (the latest)")

@@ -68,8 +68,10 @@ class Keyframe:
         n = len(self.labels)
         provisional = np.zeros(n, dtype=bool) if self.provisional is None else self.provisional
         object.__setattr__(self, "provisional", np.asarray(provisional, dtype=bool))
-        covariances = np.zeros((n, 2, 2)) if self.covariances is None else self.covariances
-        object.__setattr__(self, "covariances", np.asarray(covariances, dtype=float).reshape(n, 2, 2))
+        covariances = np.zeros((n, 2, 2)) if self.covariances is None else np.asarray(self.covariances, dtype=float)
+        if covariances.shape != (n, 2, 2):
+            raise ValueError(f"keyframe {self.id}: covariances of shape {covariances.shape}, not ({n}, 2, 2)")
+        object.__setattr__(self, "covariances", covariances)
         diff = self.centers[:, None, :] - self.centers[None, :, :]
         object.__setattr__(self, "distances", np.linalg.norm(diff, axis=-1))
 

@@ -25,7 +25,7 @@ from neoslam.geometry import make_pose
 from neoslam.types import Trajectory
 
 FRAME_PERIOD_S = 0.1
-# The README's claim: better than 1e-12 relative (measured: statistics within 2.4e-13, each error within 5e-13).
+# docs/evaluation.md's claim: better than 1e-12 relative (measured: statistics within 2.4e-13, each error within 5e-13).
 RELATIVE_AGREEMENT = 1e-12
 ABSOLUTE_AGREEMENT = 1e-12  # m or degrees, for errors near zero (one-frame RPE)
 STEP_NOISE_M = 0.03

@@ -331,22 +331,35 @@ def test_the_town_route_is_not_fooled_by_its_repeated_layout(tmp_path: Path) -> 
 # ------------------------------------------------------------------------------------------- ambiguity and windows
 
 
-def test_a_layout_stored_at_two_places_relocalises_nowhere(passes: TwoPasses) -> None:
-    """The street stored twice, 2 km apart (a copy: a repeated layout), every stored keyframe a candidate: a
-    revisit verifies at both places with the same evidence, so it relocalises at neither; once a closure has
-    joined the two (they are one place seen in two passes), it relocalises."""
-    wide = MATCHING.model_copy(update={"search_radius": 1e5})
-    detector = LoopClosureDetector(KEYFRAMES, wide)
+def _stored_twice(passes: TwoPasses, matching: MatchingConfig) -> tuple[LoopClosureDetector, Keyframe]:
+    """The street stored, then stored again 2 km away in the odometry's world (a copy: a repeated layout); and a
+    revisit of the first."""
+    detector = LoopClosureDetector(KEYFRAMES, matching)
     passes.first_pass(detector)
     copy = passes.yaw_pose(0.0, (2000.0, 0.0, 0.0))
-    for i, x in enumerate(FIRST_PASS):  # the same street stored again, elsewhere in the odometry's world
+    for i, x in enumerate(FIRST_PASS):
         keyframe = passes.keyframe(passes.yaw_pose(0.0, (x, 0.0, CAMERA_HEIGHT)), copy, frame=500 + 10 * i)
         detector.add(keyframe, 200.0 + 5.0 * i)
-    query = passes.keyframe(passes.second_pass_pose(50.0), passes.yaw_pose(DRIFT_YAW, DRIFT), 1000)
+    return detector, passes.keyframe(passes.second_pass_pose(50.0), passes.yaw_pose(DRIFT_YAW, DRIFT), 1000)
+
+
+def test_a_layout_stored_at_two_places_relocalises_nowhere(passes: TwoPasses) -> None:
+    """Every stored keyframe a candidate and no drift prior to tell the two copies apart: a revisit verifies at
+    both with the same evidence, so it relocalises at neither; once a closure has joined the two (they are one
+    place seen in two passes), it relocalises."""
+    detector, query = _stored_twice(passes, MATCHING.model_copy(update={"search_radius": 1e5, "drift_radius": 1e5}))
     assert detector.relocalise(query, SECOND_PASS_ODOMETER) is None
     detector.joined.join(_stored_at(50.0), len(FIRST_PASS) + _stored_at(50.0))
     found = detector.relocalise(query, SECOND_PASS_ODOMETER)
     assert found is not None and found.closure.match_keyframe in (_stored_at(50.0), len(FIRST_PASS) + _stored_at(50.0))
+
+
+def test_the_drift_prior_holds_with_the_search_radius_opened(passes: TwoPasses) -> None:
+    """Retrieval opened to the whole map finds both copies, but the odometry cannot have drifted 2 km in 300 m of
+    travel: the copy's fit costs its drift prior, and the revisit relocalises at the near place."""
+    detector, query = _stored_twice(passes, MATCHING.model_copy(update={"search_radius": 1e5}))
+    found = detector.relocalise(query, SECOND_PASS_ODOMETER)
+    assert found is not None and found.closure.match_keyframe == _stored_at(50.0)
 
 
 def test_the_query_window_holds_what_one_sparse_keyframe_misses(passes: TwoPasses) -> None:

@@ -327,3 +327,12 @@ def test_keyframes_carry_their_objects_covariances_and_move_with_them() -> None:
     np.testing.assert_allclose(moved.pose, turn @ keyframe.pose)
     np.testing.assert_allclose(moved.covariances[:, 1, 1], keyframe.covariances[:, 0, 0])  # x became y
     np.testing.assert_allclose(moved.distances, keyframe.distances)
+
+
+def test_a_keyframe_refuses_covariances_of_the_wrong_shape() -> None:
+    keyframe = KeyframeBuilder(
+        DEFAULTS.model_copy(update={"min_objects": 2, "min_observations": 1, **FIXED_RADIUS})
+    ).add(0, _at(0.0), (_seen([12.0, 4.0, 0.0]), _seen([20.0, -4.0, 0.0])), travelled_m=0.0)
+    assert keyframe is not None
+    with pytest.raises(ValueError, match=r"covariances of shape \(8,\), not \(2, 2, 2\)"):
+        replace(keyframe, covariances=keyframe.covariances.ravel())

@@ -104,3 +104,10 @@ def test_an_empty_index_and_a_keyframe_of_two_objects_score_nothing() -> None:
     assert [part.shape for part in index.scores(triangle)] == [(0,), (0,)]
     index.add(_keyframe([[0, 0, 0], [5, 0, 0]], ["car"] * 2))
     assert [part.tolist() for part in index.scores(triangle)] == [[0.0], [0.0]]
+
+
+def test_a_keyframe_without_objects_is_stored_and_queried_with_no_keys() -> None:
+    index = TriangleIndex(1.0, 12, 40.0)
+    empty = _keyframe(np.zeros((0, 3)), [])
+    index.add(empty)
+    assert [part.tolist() for part in index.scores(empty)] == [[0.0], [0.0]]

@@ -132,4 +132,4 @@ def test_yaw_rate_bias_of_each_profile_exactly(straight: Trajectory, name: str) 
     _, unbiased = noisy_odometry(straight, profile.model_copy(update={"yaw_rate_bias": 0.0}), np.random.default_rng(5))
     np.testing.assert_allclose(biased[1:, 2] - unbiased[1:, 2], profile.yaw_rate_bias, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(biased[1:, :2], unbiased[1:, :2])
-    assert NOISE_PROFILES["vo"].yaw_rate_bias == NOISE_PROFILES["heavy"].yaw_rate_bias == 0.001  # README's table
+    assert NOISE_PROFILES["vo"].yaw_rate_bias == NOISE_PROFILES["heavy"].yaw_rate_bias == 0.001  # docs/formats.md

@@ -40,7 +40,7 @@ class Growth:
     observations_per_object: int = 4
     gc_cells: int = 27
     hd_cells: int = 5
-    second_session: int = 6  # the step from which session 2 runs
+    second_session: int = 6  # the step from which the second session runs
     correction_every: int = 3  # steps between corrections that move every pose
     weights: tuple[tuple[str, tuple[int, ...]], ...] = (("hidden.weight", (32, 3)), ("hidden.bias", (32,)))
 

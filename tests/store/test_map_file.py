@@ -1,4 +1,4 @@
-"""The map file (issue 13): what goes in comes out exactly, commits write only what changed, every file that is not
+"""The map file: what goes in comes out exactly, commits write only what changed, every file that is not
 a map this run may extend is refused with one line and left untouched, and a read-only map is never written."""
 
 from __future__ import annotations

@@ -45,7 +45,7 @@ DISTANCE_BANDS: tuple[tuple[str, float, float], ...] = (
     (">= 40 m", 40.0, math.inf),
 )
 DEFAULT_MIN_BOX_HEIGHT = 12.0
-NEAR_RANGE_M = 40.0  # the "nearer than 40 m": the stereo range objects are placed in
+NEAR_RANGE_M = 40.0  # the recall target's "nearer than 40 m": the stereo range objects are placed in
 
 
 @dataclass(frozen=True, slots=True)

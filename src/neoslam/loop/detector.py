@@ -76,8 +76,17 @@ class LoopClosureDetector:
     def _match(self, query: Keyframe, stored: Keyframe, tested: int = 1) -> KeyframeMatch:
         return match_keyframes(query, stored, self.config, self.e_max, self.index.label_shares(), tested)
 
-    def _place(self, keyframe_id: int) -> Place:
-        return self.places.place(self.index.keyframes, self.index.slot(keyframe_id))
+    def _place(self, keyframe_id: int, odometer_m: float) -> Place:
+        """The stored place of a candidate, without its recent members (`exclude_recent_distance`): their objects
+        are the query's own street seen moments ago, and would agree with it whatever the place."""
+        place = self.places.place(self.index.keyframes, self.index.slot(keyframe_id))
+        recent = odometer_m - self.config.exclude_recent_distance
+        kept = [m for m in place.members if self.index.odometer(m) <= recent]
+        if len(kept) == len(place.members):
+            return place
+        keyframes = [self.index.keyframes[m] for m in kept]
+        merged = merge_keyframes(keyframes, self.index.keyframes[keyframe_id], self.places.association_radius)
+        return Place(merged, tuple(int(m) for m in kept))
 
     def _closure(self, query: Keyframe, match: KeyframeMatch) -> tuple[LoopClosure, np.ndarray]:
         """The closure and the offset (x, y, z) between the two robot poses implied by the fit."""
@@ -127,7 +136,7 @@ class LoopClosureDetector:
                 break
             if candidate in tried:
                 continue
-            place = self._place(candidate)
+            place = self._place(candidate, odometer_m)
             tried.update(place.members)
             places += 1
             if shared is not None and max(shared[self.index.slot(m)] for m in place.members) < (
@@ -170,7 +179,8 @@ class LoopClosureDetector:
             return None
         nearest = self.index.nearest((match.transform @ keyframe.pose)[:3, 3], members)
         evidence = match.evidence + self._drift_bits(keyframe, match.transform, nearest, odometer_m)
-        if evidence < self.config.min_evidence_bits + np.log2(max(len(eligible), 1)):
+        needed = self.config.min_evidence_bits + np.log2(max(len(eligible), 1))
+        if self.config.tolerances == "covariance" and evidence < needed:
             return None
         match = replace(match, match=nearest, evidence=evidence)
         closure, offset = self._closure(keyframe, match)
@@ -203,12 +213,13 @@ class LoopClosureDetector:
 
     def _drift_bits(self, keyframe: Keyframe, transform: np.ndarray, stored: int, odometer_m: float) -> float:
         """What a fit that moves the robot by d from where its odometry puts it costs, bits: the odometry's drift
-        since the stored keyframe is taken as Gaussian with the search radius R there three standard deviations,
-        -log2 of its density ratio to the centre, 4.5 (d / R)² / ln 2 (6.5 bits at R). With tolerances fixed: none."""
+        since the stored keyframe is taken as Gaussian with the drift radius R there (`drift_radius` plus
+        `drift_radius_per_metre` of the metres travelled since) three standard deviations, -log2 of its density
+        ratio to the centre, 4.5 (d / R)² / ln 2 (6.5 bits at R). With tolerances fixed: none."""
         if self.config.tolerances == "fixed":
             return 0.0
         travelled = odometer_m - self.index.odometer(stored)
-        radius = self.config.search_radius + self.config.search_radius_per_metre * travelled
+        radius = self.config.drift_radius + self.config.drift_radius_per_metre * travelled
         position = keyframe.pose[:3, 3]
         moved = np.linalg.norm(transform_points(transform, position[None])[0, :2] - position[:2])
         return float(-4.5 * (moved / radius) ** 2 / np.log(2.0))

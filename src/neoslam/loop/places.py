@@ -8,7 +8,8 @@ lie within `matching.place_radius` of the candidate's, following the stored orde
 (so one pass: a later pass of the same street lies elsewhere in the order). The keyframes of one pass share the
 odometry frame, which is accurate over so short a stretch, so their objects are merged in place: objects of one
 label within `keyframes.association_radius` are one, and the estimate with the smallest covariance (the most views)
-stands for it. The query stays a single keyframe: the share of objects a match must explain is taken of it.
+stands for it. A query is merged the same way from the keyframes queried just before it (`matching.query_radius`:
+the query window, loop.detector).
 """
 
 from __future__ import annotations

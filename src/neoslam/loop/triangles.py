@@ -17,12 +17,13 @@ from itertools import combinations
 
 import numpy as np
 
+from neoslam.config import TRIANGLE_SIDE_BITS
 from neoslam.types import Keyframe
 
 __all__ = ["TriangleIndex", "triangle_keys"]
 
 LABEL_BITS = 6  # up to 63 labels (COCO has 80 classes; a street uses far fewer)
-SIDE_BITS = 8  # up to 255 bins a side
+SIDE_BITS = TRIANGLE_SIDE_BITS  # up to 255 bins a side (matching.triangle_max_side / triangle_side_bin)
 MERGE_SHARE = 0.25  # the unsorted tail is merged into the sorted keys once it holds this share of them
 MIN_TAIL = 4096  # or, while the index is small, this many keys
 MAX_TAIL = 32768  # and at most this many: a query sorts the tail (a merge costs a sort of all keys, < 1 ms per add)
@@ -44,10 +45,10 @@ def _triangles(
     """(t, 3) label codes and (t, 3) sides (m) of the keyframe's triangles, each ordered by its sides, shortest
     first, each label that of the vertex opposite its side."""
     centres = keyframe.centers[:, :2]
-    current = np.argmin(np.linalg.norm(centres - keyframe.pose[:2, 3], axis=1)) if len(centres) else 0
-    nearest = np.argsort(np.linalg.norm(centres - centres[current], axis=1), kind="stable")[:max_objects]
-    if len(nearest) < 3:
+    if len(centres) < 3:
         return np.zeros((0, 3), dtype=np.int64), np.zeros((0, 3))
+    current = np.argmin(np.linalg.norm(centres - keyframe.pose[:2, 3], axis=1))
+    nearest = np.argsort(np.linalg.norm(centres - centres[current], axis=1), kind="stable")[:max_objects]
     triples = np.array(list(combinations(nearest, 3)))
     points = centres[triples]  # (t, 3, 2)
     sides = np.linalg.norm(points[:, [1, 2, 0]] - points[:, [2, 0, 1]], axis=2)  # side opposite each vertex
@@ -66,8 +67,8 @@ def triangle_keys(
     labels, sides = _triangles(keyframe, codes, max_objects, max_side)
     scaled = sides / side_bin
     bins = np.floor(scaled).astype(np.int64)
-    if not spread:
-        return np.unique(_pack(labels, np.minimum(bins, 2**SIDE_BITS - 1)))
+    if not spread:  # matching.triangle_max_side keeps every side within SIDE_BITS
+        return np.unique(_pack(labels, bins))
     neighbour = np.where(scaled - bins >= 0.5, bins + 1, bins - 1)
     keys = []
     for choice in range(8):  # each side in its own bin or its nearer neighbour

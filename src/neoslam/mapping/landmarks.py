@@ -1,4 +1,4 @@
-"""Objects as landmarks in the pose graph, solved incrementally by iSAM2 (beyond the paper, issue 15).
+"""Objects as landmarks in the pose graph, solved incrementally by iSAM2 (beyond the paper).
 
 Every static object seen from several experiences constrains their poses. The graph holds a Pose3 per experience
 (keyed by its id) and a Point3 per confirmed object of the object map (keyed `l` + its id), a between-factor per
@@ -13,8 +13,8 @@ GTSAM picks for the measured direction, which lies any way round the ray) and ra
   object_centres): where the object's orientation and extent are unknown, its middle is uncertain by about the
   class's footprint radius along the ray (`landmark_centre_sigma` radii). A wrong shift is a view-dependent bias
   (forward for objects ahead, less for objects beside), which the range would turn into a scale error of the map;
-  the std weakens it but cannot remove a bias all views share (README's straight drive with centres already at the
-  middles: 2.2 % scale and 4 m of height before, 0.7 % and 0.9 m at 2 radii);
+  the std weakens it but cannot remove a bias all views share (docs/api_example.py's straight drive with centres
+  already at the middles: 2.2 % scale and 4 m of height without these stds, 0.7 % and 0.9 m at 2 radii);
 - in height, `landmark_height_sigma`: object heights from stereo boxes are poor, and a landmark must not pull the
   map up or down.
 A landmark so constrains the map mostly through its bearing in the ground plane, which the shift does not bias.

@@ -58,7 +58,8 @@ class DetectorConfig(_Section):
     model: Path | None = Field(
         None,
         description="the ONNX model; none: $NEOSLAM_DATA (default ../shared/data)/models/yolox_nano_coco/"
-        "yolox_nano.onnx for yolox, .../yolo11n_coco/yolo11n_coco.onnx for yolo11 (see README for how to get them)",
+        "yolox_nano.onnx for yolox, .../yolo11n_coco/yolo11n_coco.onnx for yolo11 (docs/formats.md says how to get "
+        "them)",
     )
     labels_file: Path | None = Field(
         None,

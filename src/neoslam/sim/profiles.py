@@ -49,7 +49,7 @@ _REAL_DETECTION = DetectionNoiseConfig(
     disparity_sigma=0.23,
     # the appearance patches: fitted by `python benchmarks/appearance.py` to the real front end's patch RMSE of the
     # same car across frames and of different cars (kitti_06_51: medians 30.8 and 49.8 grey levels; simulated
-    # 28.3 and 54.8 with these, 17.0 and 61.5 with the earlier 0.08 and 0.5)
+    # 28.3 and 54.8 with these; 17.0 and 61.5 with the world default gain and individuality, 0.08 and 0.5)
     patch_gain_sigma=0.2,
     texture_individuality=0.4,
 )
@@ -65,7 +65,7 @@ DETECTION_PROFILES: dict[str, DetectionProfile] = {
         "calibrated to the real front end on KITTI 06 (benchmarks/calibrate_sim.py)", _REAL_DETECTION, _REAL_WORLD
     ),
     "ideal": DetectionProfile(
-        "the earlier model: a rich street and a detector that finds most objects to 40 m",
+        "the simulator's defaults: a rich street and a detector that finds most objects to 40 m",
         DetectionNoiseConfig(),
         WorldConfig(),
     ),

@@ -1,1 +1,1 @@
-"""A map that persists: one SQLite file written as the run goes, loaded by later sessions (issue 13)."""
+"""A map that persists: one SQLite file written as the run goes, loaded by later sessions."""

@@ -1,4 +1,4 @@
-"""The map file: one SQLite database that holds a NeoSLAM map and grows at every keyframe of a run (issue 13).
+"""The map file: one SQLite database that holds a NeoSLAM map and grows at every keyframe of a run.
 
 A run writes its map into the file as it goes, one transaction per `commit` (only what is new or changed since the
 last one), so that a killed run leaves the map up to its last committed keyframe; a later session opens the file,
