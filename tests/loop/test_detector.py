@@ -3,18 +3,27 @@ the whole pipeline, the town route's repeated layout through the keyframes and t
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from neoslam.config import EvaluationConfig, KeyframeConfig, MatchingConfig, NeoSLAMConfig, SimulatorConfig
+from neoslam.config import (
+    EvaluationConfig,
+    KeyframeConfig,
+    MapStoreConfig,
+    MatchingConfig,
+    NeoSLAMConfig,
+    SimulatorConfig,
+)
 from neoslam.datasets.simulated import read_dataset, write_dataset
 from neoslam.evaluation.loops import LoopCriteria, evaluate_closures
 from neoslam.geometry import invert_pose, make_pose, planar_motion, rotation_angle, transform_points
 from neoslam.loop.detector import LoopClosureDetector
 from neoslam.loop.keyframes import KeyframeBuilder
 from neoslam.loop.matching import match_keyframes
+from neoslam.loop.relocaliser import MapRelocaliser
 from neoslam.pipeline import run
 from neoslam.sim.routes import ROUTES
 from neoslam.sim.simulator import simulate_route
@@ -386,3 +395,25 @@ def test_the_query_window_holds_what_one_sparse_keyframe_misses(passes: TwoPasse
     assert detector.relocalise(sparse[0], SECOND_PASS_ODOMETER) is None
     found = detector.relocalise(sparse[1], SECOND_PASS_ODOMETER + 4.0)
     assert found is not None and found.closure.match_keyframe in (_stored_at(50.0), _stored_at(50.0) + 1)
+
+
+def test_a_stored_place_leaves_out_its_members_from_the_last_metres(make_keyframe, make_yaw_pose) -> None:
+    """A place is its candidate with the same-pass neighbours near it; a neighbour made within
+    `exclude_recent_distance` of travel is the query's own street seen moments ago and is left out; the whole-map
+    relocaliser of a later session has no recent keyframes."""
+    detector = LoopClosureDetector(KEYFRAMES, MATCHING)
+    stored = [
+        replace(
+            make_keyframe([[x + 10.0, 4.0, 0.0], [x + 14.0, -4.0, 0.0]], ["car", "car"], id=i, frame_index=i),
+            pose=make_yaw_pose(0.0, (x, 0.0, 0.0)),
+        )
+        for i, x in enumerate((0.0, 5.0))
+    ]
+    for i, keyframe in enumerate(stored):
+        detector.add(keyframe, 30.0 * i)
+    travelled = 30.0 + MATCHING.exclude_recent_distance - 1.0  # the second keyframe is still recent
+    place = detector._place(0, travelled)
+    assert place.members == (0,) and len(place.keyframe.labels) == 2
+    assert detector._place(0, travelled + 2.0).members == (0, 1)
+    relocaliser = MapRelocaliser(KEYFRAMES, MATCHING, MapStoreConfig(), stored)
+    assert relocaliser._place(0, 0.0).members == (0, 1)

@@ -80,8 +80,7 @@ class LoopClosureDetector:
         """The stored place of a candidate, without its recent members (`exclude_recent_distance`): their objects
         are the query's own street seen moments ago, and would agree with it whatever the place."""
         place = self.places.place(self.index.keyframes, self.index.slot(keyframe_id))
-        recent = odometer_m - self.config.exclude_recent_distance
-        kept = [m for m in place.members if self.index.odometer(m) <= recent]
+        kept = [m for m in place.members if not self.index.recent(m, odometer_m)]
         if len(kept) == len(place.members):
             return place
         keyframes = [self.index.keyframes[m] for m in kept]

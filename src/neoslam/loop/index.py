@@ -132,6 +132,10 @@ class KeyframeIndex:
         near = np.linalg.norm(self._positions[:n] - position[:2], axis=1) <= radius
         return self._ids[:n][near & (travelled >= self.config.exclude_recent_distance)]
 
+    def recent(self, keyframe_id: int, odometer_m: float) -> bool:
+        """Whether a stored keyframe was made within the last `exclude_recent_distance` metres of travel."""
+        return odometer_m - self.odometer(keyframe_id) < self.config.exclude_recent_distance
+
     def ranked(self, query: Keyframe, eligible: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """The eligible ids (increasing), most alike to the query first: by shared triangles (`retrieval:
         triangles`, loop.triangles), or by signature; and with triangles, the number of triangle keys every stored

@@ -36,6 +36,9 @@ class WholeMapIndex(KeyframeIndex):
     def eligible(self, position: np.ndarray, odometer_m: float) -> np.ndarray:
         return self._ids[: len(self.keyframes)].copy()
 
+    def recent(self, keyframe_id: int, odometer_m: float) -> bool:
+        return False  # a stored map's keyframes were made in another session
+
 
 class MapRelocaliser(LoopClosureDetector):
     """Closures between a session's keyframes and a stored map's, searching the whole map."""
