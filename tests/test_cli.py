@@ -114,6 +114,7 @@ def test_dump_config_with_file_and_environment(tmp_path: Path) -> None:
     assert dumped.grid_cells == NeoSLAMConfig().grid_cells
 
 
+@pytest.mark.slow
 def test_simulate_prints_a_summary(workspace: Path) -> None:
     summary = (workspace / "simulate_stdout.txt").read_text()
     assert summary.startswith(f"wrote {workspace / 'data'}: {FRAMES} frames, ")
@@ -183,6 +184,7 @@ def test_run_without_truth_gives_the_same_map(workspace: Path) -> None:
     assert not (without / "groundtruth_tum.txt").exists()
 
 
+@pytest.mark.slow
 def test_existing_out_is_refused_unless_overwrite(workspace: Path, tmp_path: Path) -> None:
     out = tmp_path / "out"
     out.mkdir()
@@ -311,6 +313,7 @@ def test_bad_input_is_one_line_and_exit_2(case: str, bad_inputs: Path) -> None:
     assert not [p for p in bad_inputs.iterdir() if "partial" in p.name]
 
 
+@pytest.mark.slow
 def test_bad_input_in_a_real_process(tmp_path: Path) -> None:
     (tmp_path / "nan.txt").write_text(BAD_FILES["nan.txt"])
     command = [_executable(), "simulate", "--trajectory", str(tmp_path / "nan.txt"), "--out", str(tmp_path / "o")]
@@ -395,6 +398,7 @@ def block_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return outs
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("backend", ["relaxation", "pose-graph"])
 def test_run_records_its_backend(block_runs: dict[str, Path], backend: str) -> None:
     out = block_runs[backend]
@@ -519,6 +523,7 @@ def image_run(tmp_path_factory: pytest.TempPathFactory, shared_data: Path) -> Pa
     return out
 
 
+@pytest.mark.slow
 def test_run_on_kitti_images_writes_the_results_folder(image_run: Path) -> None:
     assert {p.name for p in image_run.iterdir()} >= RESULT_FILES
     objects = (image_run / "objects.csv").read_text().splitlines()
@@ -577,6 +582,7 @@ def test_image_options_need_a_kitti_root(workspace: Path, tmp_path: Path) -> Non
 # --- neoslam detect ---
 
 
+@pytest.mark.slow
 def test_detect_writes_what_run_reads(shared_data: Path, tmp_path: Path) -> None:
     """`neoslam detect` runs the detector once; `run --detections` on its file maps what a run with the detector
     maps (same detections, so the same objects)."""

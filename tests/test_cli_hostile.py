@@ -141,6 +141,7 @@ def _run_kitti(root: Path, out: Path, detections: Path | None = None, odometry: 
         ("wx", "-1e300", ["frames.csv:5", "rotation rate 1e+300", "motion_limits.max_turn_rate"]),
     ],
 )
+@pytest.mark.slow
 def test_impossible_velocity_in_frames_csv_is_refused(dataset: Path, column: str, value: str, expected: list[str]):
     _set_cell(dataset / "frames.csv", 3, column, value)
     _one_line_error(_invoke("run", dataset, "--out", dataset.parent / "o", "-q"), *expected)

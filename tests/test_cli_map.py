@@ -62,6 +62,7 @@ def map_copy(first_session, tmp_path: Path) -> Path:
     return copy
 
 
+@pytest.mark.slow
 def test_the_first_session_makes_a_map_in_its_own_frame(first_session):
     map_path, results = first_session
     session = _metrics(results)["session"]
@@ -75,6 +76,7 @@ def test_the_first_session_makes_a_map_in_its_own_frame(first_session):
     assert {e.session for e in stored.experiences} == {1}
 
 
+@pytest.mark.slow
 def test_a_second_session_relocalises_in_the_map_and_extends_it(street, first_session, map_copy, tmp_path):
     results_a = first_session[1]
     _ok("run", street, "--map", map_copy, "--out", tmp_path / "b", "--quiet")
@@ -94,6 +96,7 @@ def test_a_second_session_relocalises_in_the_map_and_extends_it(street, first_se
     assert any(c.session == 2 and c.match_session == 1 for c in stored.closures)
 
 
+@pytest.mark.slow
 def test_localise_only_uses_the_map_and_changes_nothing_in_it(street, map_copy, tmp_path):
     before = _digest(map_copy)
     _ok("run", street, "--map", map_copy, "--localise-only", "--out", tmp_path / "c", "--quiet")
@@ -103,6 +106,7 @@ def test_localise_only_uses_the_map_and_changes_nothing_in_it(street, map_copy, 
     assert sorted(p.name for p in map_copy.parent.iterdir()) == ["c", "map.db"]
 
 
+@pytest.mark.slow
 def test_the_same_sessions_give_the_same_map(street, first_session, tmp_path):
     _ok("run", street, "--map", tmp_path / "again.db", "--out", tmp_path / "a", "--quiet")
     assert _digest(tmp_path / "again.db") == _digest(first_session[0])
@@ -180,6 +184,7 @@ def _executable() -> str:
     return found
 
 
+@pytest.mark.slow
 def test_a_run_killed_mid_way_leaves_a_map_a_later_session_relocalises_in(street, first_session, tmp_path):
     """SIGKILL (no handler runs) once the run has committed: the map opens, passes SQLite's integrity check, holds
     a prefix of what the whole run stores, and a later session relocalises in it. (benchmarks/sessions.py kills

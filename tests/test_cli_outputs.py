@@ -61,6 +61,7 @@ def kitti_root(tmp_path: Path) -> Path:
     return root
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("where", ["itself", "parent", "inside"])
 def test_run_refuses_an_output_at_its_dataset(dataset: Path, where: str) -> None:
     out = {"itself": dataset, "parent": dataset.parent, "inside": dataset / "results"}[where]
@@ -192,6 +193,7 @@ def _wait_for_staging(out: Path, process: subprocess.Popen, timeout_s: float = 6
     time.sleep(1.0)  # into the simulation and run
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_a_signal_stops_a_run_within_a_second_and_leaves_nothing(tmp_path: Path, stop: signal.Signals) -> None:
     out = tmp_path / "parent" / "results"
@@ -210,6 +212,7 @@ def test_a_signal_stops_a_run_within_a_second_and_leaves_nothing(tmp_path: Path,
     assert list(tmp_path.iterdir()) == []  # neither the results nor the parent folder the run created
 
 
+@pytest.mark.slow
 def test_a_second_run_on_the_same_output_is_refused_while_the_first_writes(tmp_path: Path) -> None:
     out = tmp_path / "results"
     first = _start_default_run(out, tmp_path)

@@ -111,6 +111,7 @@ def test_record_a_kitti_file_with_times(tmp_path: Path) -> None:
     )
 
 
+@pytest.mark.slow
 def test_results_folder(results: tuple[Path, dict]) -> None:
     out, metrics = results
     names = {p.name for p in out.iterdir()}
@@ -195,6 +196,7 @@ def test_kitti_root_needs_a_sequence_and_a_failed_run_leaves_nothing(tmp_path: P
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_run_without_truth(dataset: Path, tmp_path: Path) -> None:
     copy = Path(shutil.copytree(dataset, tmp_path / "dataset"))
     shutil.rmtree(copy / "truth")
@@ -220,6 +222,7 @@ def test_run_on_two_frames(tmp_path: Path) -> None:
     assert metrics["frames"] == 2
 
 
+@pytest.mark.slow
 def test_default_scenario_end_to_end(tmp_path: Path) -> None:
     """`neoslam run` without DATA: the built-in town route, simulated and run (the one full-route test)."""
     out = tmp_path / "out"

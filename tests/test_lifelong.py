@@ -17,6 +17,8 @@ from neoslam.sim.passes import join_passes
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.sim.simulator import simulate
 
+pytestmark = pytest.mark.slow  # every test here runs whole drives, real images or real bags
+
 CONFIG = NeoSLAMConfig()
 PASSES = 3
 

@@ -16,6 +16,8 @@ from neoslam.io.tables import read_table
 from neoslam.pipeline import RunResult, run
 from neoslam.types import Frame, ObjectObservation
 
+pytestmark = pytest.mark.slow  # every test here runs whole drives, real images or real bags
+
 PERIOD, SPEED, FRAMES = 0.1, 10.0, 400
 FX, BASELINE, DISPARITY_SIGMA = 707.0912, 0.5372, 0.3
 PARKED = [(x, side * 5.0) for x in np.arange(0.0, 480.0, 8.0) for side in (-1, 1)]

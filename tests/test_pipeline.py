@@ -42,6 +42,7 @@ def test_object_vectors_are_allocentric() -> None:
     np.testing.assert_allclose(direction, [np.pi / 2, np.pi], atol=1e-9)
 
 
+@pytest.mark.slow
 def test_cells_integrate_the_odometry(block: Path) -> None:
     # No Hebbian recall: an injection at a loop closure would (rightly) pull the cells off the odometry.
     silent = CONFIG.model_copy(
@@ -63,6 +64,7 @@ def _yaw(poses: np.ndarray) -> np.ndarray:
     return np.arctan2(poses[:, 1, 0], poses[:, 0, 0])
 
 
+@pytest.mark.slow
 def test_object_vector_cells_train_on_keyframes(block: Path) -> None:
     dataset = read_dataset(block)
     result = run(dataset.frames(), CONFIG, total=len(dataset), progress=False)
@@ -76,6 +78,7 @@ def test_object_vector_cells_train_on_keyframes(block: Path) -> None:
     assert losses[-1] < 0.5 * losses[0]  # the loss falls over training (paper Fig. 4a)
 
 
+@pytest.mark.slow
 def test_results_hold_a_trained_network_that_reloads(block: Path, tmp_path: Path) -> None:
     metrics = run_dataset(block, tmp_path / "out", CONFIG, progress=False)
     cells = ObjectVectorCells.load(tmp_path / "out" / "ovcn.pt")
@@ -86,6 +89,7 @@ def test_results_hold_a_trained_network_that_reloads(block: Path, tmp_path: Path
     assert metrics["cells"]["grid_cells_vs_odometry_rms_m"] < 3.0
 
 
+@pytest.mark.slow
 def test_two_runs_give_the_same_network(block: Path) -> None:
     dataset = read_dataset(block)
     first = run(dataset.frames(), CONFIG, total=len(dataset), progress=False)

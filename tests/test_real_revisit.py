@@ -18,6 +18,8 @@ from neoslam.geometry import invert_pose
 from neoslam.perception.frontend import open_front_end
 from neoslam.pipeline import RunResult, run
 
+pytestmark = pytest.mark.slow  # every test here runs whole drives, real images or real bags
+
 FRAMES = 51
 THIRD_PASS = PhotometricChange(gain=0.8, offset=15.0, noise_sigma=3.0, blur_sigma=0.7, shift_x=1.3, shift_y=-0.8)
 TRUE_CLOSURE_M = 5.0  # the evaluation's criterion: the two frames' true positions this close

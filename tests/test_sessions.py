@@ -41,6 +41,7 @@ def town_sessions() -> tuple[list[SessionRecording], NeoSLAMConfig]:
     return session_recordings(truth, [(0, 1800), (1300, len(truth))], sim, [3, 4], "town"), config
 
 
+@pytest.mark.slow
 def test_a_later_session_relocalises_in_the_stored_map_and_ends_in_its_frame(town_sessions, tmp_path):
     (a, b), config = town_sessions
     slam_a, result_a = _drive(a, config, None, tmp_path / "a")
@@ -72,6 +73,7 @@ def test_a_later_session_relocalises_in_the_stored_map_and_ends_in_its_frame(tow
     assert any(c.session == 2 and c.match_session == 1 for c in state.closures)
 
 
+@pytest.mark.slow
 def test_a_session_in_a_world_the_map_never_saw_never_joins_it(town_sessions, tmp_path):
     (a, _), config = town_sessions
     slam_a, _ = _drive(a, config, None, tmp_path / "a")

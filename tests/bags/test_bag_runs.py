@@ -15,6 +15,8 @@ from cli_runner import invoke as _invoke
 from cli_runner import ok as _ok
 from neoslam.io.trajectory_files import read_trajectory, write_tum
 
+pytestmark = pytest.mark.slow  # every test here runs whole drives, real images or real bags
+
 FRAMES = 30  # the first keyframes of the street come at frames 22 and 27
 EPOCH_S = 1_317_384_000  # tests/bags/conftest.py: the bags' stamps are KITTI's times from this second on
 SAME_BYTES = ("objects.csv", "loop_closures.csv", "experience_map.g2o", "trajectory_kitti.txt", "odometry_kitti.txt")

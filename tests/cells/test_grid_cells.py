@@ -160,6 +160,7 @@ def test_decoding_a_packet_across_the_wrap():
         (0.0, 0.0, 0.2),  # vertical only
     ],
 )
+@pytest.mark.slow
 def test_constant_motion_is_decoded_as_dead_reckoning(metres, heading, vertical):
     cells = settled_cells()
     previous = cells.centre

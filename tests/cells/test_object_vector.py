@@ -68,6 +68,7 @@ def test_field_is_continuous_across_plus_minus_pi():
     assert object_vector_field(10.0, math.pi, config) == pytest.approx(object_vector_field(10.0, -math.pi, config))
 
 
+@pytest.mark.slow
 def test_training_loss_falls_and_the_field_is_learnt(fitted):
     cells, losses = fitted
     assert len(losses) == FIT_CONFIG.epochs and cells.loss_history == losses

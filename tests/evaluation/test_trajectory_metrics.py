@@ -109,6 +109,7 @@ def test_ate_matches_evo(evo, kitti_pair, sequence, mode):
     assert_agrees(evo, absolute_trajectory_error(est, ref, align=mode), ape)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sequence", ["05", "00"])
 @pytest.mark.parametrize(("delta", "unit"), [(1, "frames"), (10, "frames"), (100.0, "m")])
 def test_rpe_matches_evo(evo, kitti_pair, sequence, delta, unit):

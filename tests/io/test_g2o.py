@@ -42,6 +42,7 @@ def read_back(experience_map: ExperienceMap, tmp_path_factory: pytest.TempPathFa
     return path, graph, initial
 
 
+@pytest.mark.slow
 def test_vertices_are_the_corrected_experience_poses(experience_map: ExperienceMap, read_back) -> None:
     _, _, initial = read_back
     poses = experience_map.graph.poses

@@ -283,6 +283,7 @@ def _run_route(name: str, seed: int, folder: Path):
     return dataset, run(dataset.frames(), NeoSLAMConfig(), total=len(dataset), progress=False)
 
 
+@pytest.mark.slow
 def test_the_block_route_closes_loops_with_full_precision(tmp_path: Path) -> None:
     dataset, result = _run_route("block", 11, tmp_path / "block")
     assert len(result.loop_closures) >= 5
@@ -310,6 +311,7 @@ def _detected_closures(dataset) -> tuple[list, list]:
     return detector.index.keyframes, closures
 
 
+@pytest.mark.slow
 def test_the_town_route_is_not_fooled_by_its_repeated_layout(tmp_path: Path) -> None:
     write_dataset(tmp_path / "town", simulate_route("town", SimulatorConfig(seed=0, detection_profile="ideal")))
     dataset = read_dataset(tmp_path / "town")

@@ -213,12 +213,14 @@ def run_block(frames, experience_map: dict, source: bool = True):
     return slam.result(np.zeros(len(frames)))
 
 
+@pytest.mark.slow
 def test_switched_off_the_map_is_todays(block_frames):
     frames, _ = block_frames
     today = run_block(frames, {"object_landmarks": False}, source=False).estimate.poses
     assert run_block(frames, {"object_landmarks": False}).estimate.poses.tobytes() == today.tobytes()
 
 
+@pytest.mark.slow
 def test_the_relaxation_ignores_the_switch(block_frames):
     frames, _ = block_frames
     relaxed = run_block(frames, {"backend": "relaxation"}).estimate.poses
@@ -226,6 +228,7 @@ def test_the_relaxation_ignores_the_switch(block_frames):
     assert switched.tobytes() == relaxed.tobytes()
 
 
+@pytest.mark.slow
 def test_a_run_with_landmarks_is_deterministic_and_no_worse(block_frames):
     frames, truth = block_frames
     first = run_block(frames, {"object_landmarks": True})
@@ -243,6 +246,7 @@ def recorded(recording, folder):
     return read_dataset(folder).frames()
 
 
+@pytest.mark.slow
 def test_a_later_session_rebuilds_the_solver_in_the_joined_map(tmp_path):
     """Town driven in two sessions with landmarks: the second starts its own part, relocalises in the stored map
     and joins it (a rigid move), after which the solver holds the joined part, stored experiences included."""

@@ -84,6 +84,7 @@ def first_flagged(column: np.ndarray) -> int:
     return int(np.count_nonzero(seen <= flagged[0]))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(5))
 def test_static_objects_are_never_judged_moving_even_far(seed: int) -> None:
     """Parked cars and people out to 40 m and more, with the stereo noise the depth model allows (2.5 times the
@@ -212,6 +213,7 @@ def parked_and_driving(length: float, seed: int) -> tuple[list, int]:
     return [*parked, *oncoming, *ahead], len(parked)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("heading", "distance"), [(0.032, 0.32), (0.0, 0.3)])
 def test_the_odometry_noise_is_estimated_from_the_street(heading, distance) -> None:
     """Heavy odometry noise not stated (the defaults are `vo`'s, ten and five times less): the tracks estimate it
@@ -227,6 +229,7 @@ def test_the_odometry_noise_is_estimated_from_the_street(heading, distance) -> N
     assert estimating.odometry_noise() == (max(estimate[0], 0.0032), max(estimate[1], 0.063))
 
 
+@pytest.mark.slow
 def test_parked_cars_are_judged_by_the_estimated_noise() -> None:
     """Under heavy odometry noise not stated, the estimate takes half or more of the parked cars' views the stated
     (`vo`) noise takes for moving back in, and the traffic the stated noise finds is still found."""
@@ -243,6 +246,7 @@ def test_parked_cars_are_judged_by_the_estimated_noise() -> None:
     assert driving >= 0.8 * driven  # most of what the stated noise finds (cars 100 m and more off are not judged)
 
 
+@pytest.mark.slow
 def test_odometry_as_good_as_stated_leaves_the_stated_noise() -> None:
     """Odometry with `vo`'s noise, through traffic: the estimate stays near or below the stated floor."""
     objects, _ = parked_and_driving(300.0, seed=6)

@@ -217,6 +217,7 @@ def test_objects_seen_too_few_times_are_forgotten() -> None:
     assert (car.id, car.label, car.observations) == (1, "car", 3)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(3))
 def test_the_spatial_hash_associates_as_a_full_search(seed: int) -> None:
     """Each observation joins the nearest object of its label inside its gate (in the ground plane the association

@@ -84,6 +84,7 @@ def test_parked_cars_stay_put_in_the_world(
     assert _spread(far) <= FAR_CAR_SPREAD_M
 
 
+@pytest.mark.slow
 def test_frames_carry_odometry_velocities_and_objects(
     mini_sequence: KittiSequence, perception: PerceptionConfig
 ) -> None:

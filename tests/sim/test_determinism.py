@@ -36,6 +36,7 @@ def seed_3(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
+@pytest.mark.slow
 def test_same_seed_same_bytes(seed_3: Path, tmp_path: Path) -> None:
     # B in a separate process with another string-hash seed: nothing may depend on set or dict hash order
     command = [_executable(), "simulate", "--route", "block", "--seed", "3", "--out", str(tmp_path / "B"), "-q"]
@@ -57,6 +58,7 @@ def test_same_seed_same_bytes(seed_3: Path, tmp_path: Path) -> None:
         assert a[name] == b[name], name
 
 
+@pytest.mark.slow
 def test_other_seed_other_data(seed_3: Path, tmp_path: Path) -> None:
     _simulate(tmp_path / "C", 4)
     a, c = _files(seed_3), _files(tmp_path / "C")

@@ -38,6 +38,7 @@ def test_none_is_the_truth(truth: Trajectory) -> None:
     np.testing.assert_allclose(_odometry(truth, "none").poses, truth.poses, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_none_is_the_truth_through_the_dataset_files(tmp_path: Path, truth: Trajectory) -> None:
     recording = simulate_route("block", replace_odometry(CONFIG, "none"))
     write_dataset(tmp_path / "d", recording)

@@ -97,6 +97,7 @@ def test_the_block_route_is_one_lap_a_pass() -> None:
     assert length.max() <= _steps(block)[0].max() * 1.05
 
 
+@pytest.mark.slow
 def test_one_world_for_every_pass_count() -> None:
     """Simulated along one pass, the world is the same however many passes are driven, and a second pass is seen
     in the objects of the first: no second set of objects."""

@@ -114,6 +114,7 @@ def test_ideal_reproduces_the_old_simulator_byte_for_byte(tmp_path: Path) -> Non
         assert hashlib.sha256((tmp_path / name).read_bytes()).hexdigest() == digest, name
 
 
+@pytest.mark.slow
 def test_real_profile_follows_its_depth_table() -> None:
     real = DETECTION_PROFILES["real"].detection
     depths = (12.0, 22.0, 32.0)

@@ -186,6 +186,7 @@ def test_left_hand_traffic_keeps_left(town_truth: Trajectory) -> None:
     assert forwards.any() and (~forwards).any()
 
 
+@pytest.mark.slow
 def test_dataset_with_traffic_reads_back(tmp_path: Path) -> None:
     config = SimulatorConfig(seed=5, world={"moving_fraction": 0.2})
     truth = drive_route(ROUTES["block"], config.frame_period, HEIGHT)
@@ -210,6 +211,7 @@ def _files(folder: Path) -> dict[str, bytes]:
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
+@pytest.mark.slow
 def test_same_seed_same_bytes_with_traffic(town_truth: Trajectory, tmp_path: Path) -> None:
     drive = tmp_path / "drive.txt"  # the town's first 40 s: traffic crosses the robot's path both ways
     write_tum(drive, Trajectory(town_truth.timestamps[:400], town_truth.poses[:400]))

@@ -12,6 +12,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import pytest
+
 from neoslam.config import NeoSLAMConfig
 from neoslam.store.map_file import MapFile
 from neoslam.store.records import MapState
@@ -36,6 +38,7 @@ def extend(path: Path, config: NeoSLAMConfig, growth, report) -> None:
                 report.send(step)
 
 
+@pytest.mark.slow
 def test_killed_runs_leave_every_committed_step(tmp_path, growth, same_state, monkeypatch):
     grow = growth(objects_per_keyframe=4, patch=12, correction_every=2)
     scratch = tmp_path / "scratch"  # where the private copies of a map opened read-only go

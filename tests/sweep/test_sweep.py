@@ -71,6 +71,7 @@ def pooled(spec_file: Path, tmp_path_factory: pytest.TempPathFactory):
     return out, run_sweep(load_spec(spec_file), out, LocalPool(2), progress=False, environ={})
 
 
+@pytest.mark.slow
 def test_pool_sweep_writes_a_row_per_cell(pooled) -> None:
     out, result = pooled
     assert (result.ran, result.reused, result.failed) == (4, 0, [])
@@ -97,6 +98,7 @@ def test_pool_sweep_writes_a_row_per_cell(pooled) -> None:
     assert json.loads((out / "sweep.json").read_text()) == {"format": "neoslam-sweep", "version": 1, "name": "tiny"}
 
 
+@pytest.mark.slow
 def test_ray_gives_the_same_table(pooled, spec_file: Path, tmp_path: Path, extra) -> None:
     ray = extra("ray", "cluster")
     out, _ = pooled
@@ -129,6 +131,7 @@ def _live_members(group: int) -> list[int]:
     return members
 
 
+@pytest.mark.slow
 def test_interrupted_sweep_resumes_with_the_missing_cells(pooled, spec_file: Path, tmp_path: Path) -> None:
     out = tmp_path / "sweep"
     neoslam = Path(sys.executable).with_name("neoslam")
@@ -167,6 +170,7 @@ def test_interrupted_sweep_resumes_with_the_missing_cells(pooled, spec_file: Pat
     assert again.cells == []  # nothing changed: nothing runs
 
 
+@pytest.mark.slow
 def test_a_deleted_cell_runs_again_alone(pooled, spec_file: Path, tmp_path: Path) -> None:
     out = tmp_path / "sweep"
     shutil.copytree(pooled[0], out)
@@ -178,6 +182,7 @@ def test_a_deleted_cell_runs_again_alone(pooled, spec_file: Path, tmp_path: Path
     assert (out / "sweep.csv").read_bytes() == (pooled[0] / "sweep.csv").read_bytes()
 
 
+@pytest.mark.slow
 def test_a_failing_cell_is_recorded_and_the_others_complete(tmp_path: Path) -> None:
     poses = [f"{0.1 * i:.1f} {0.5 * i:.2f} 0 0 0 0 0 1" for i in range(40)]
     poses[6] = "0.6 nan 0 0 0 0 0 1"
@@ -238,6 +243,7 @@ def test_cli_keeps_results_and_exits_1_on_failed_cells(tmp_path: Path) -> None:
     assert refused.exit_code == 2 and "holds the input" in refused.output
 
 
+@pytest.mark.slow
 def test_kept_results_come_back_whole(tmp_path: Path) -> None:
     spec = parse_spec(SPEC | {"noise": ["vo"], "seeds": [1], "keep_results": True}, "keep.yaml", tmp_path)
     result = run_sweep(spec, tmp_path / "out", InProcess(), progress=False, environ={})
