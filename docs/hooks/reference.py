@@ -176,11 +176,6 @@ def _commands() -> tuple[Any, Any, list[tuple[str, Any, Any]]]:
     return root, context, commands
 
 
-def command_names() -> list[str]:
-    """The names of the commands of `neoslam`, in the order `neoslam --help` lists them."""
-    return [name for name, _, _ in _commands()[2]]
-
-
 def _parameters(command: Any, context: Any) -> list[str]:
     rows = []
     for parameter in command.params:
