@@ -10,19 +10,12 @@ import numpy as np
 import pytest
 
 from neoslam.config import NOISE_PROFILES, NeoSLAMConfig
+from neoslam.config.calibration import DETECTION_PROFILES
+from neoslam.config.profiles import simulation_config
 from neoslam.errors import ConfigError, InputError, OutputError
 from neoslam.geometry import transform_points
 from neoslam.io.trajectory_files import read_tum, write_tum
-from neoslam.jobs import (
-    DEFAULT_ROUTE,
-    ImageInputs,
-    evaluate_files,
-    record,
-    run_dataset,
-    simulate_dataset,
-    simulation_config,
-)
-from neoslam.sim.profiles import DETECTION_PROFILES
+from neoslam.jobs import DEFAULT_ROUTE, ImageInputs, evaluate_files, record, run_dataset, simulate_dataset
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.types import Trajectory
 

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from neoslam.config import NeoSLAMConfig
+from neoslam.config.profiles import simulation_config
 from neoslam.datasets.simulated import read_dataset, write_dataset
 from neoslam.geometry import invert_pose
-from neoslam.jobs import simulation_config
 from neoslam.pipeline import NeoSLAM, RunResult
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.sim.sessions import SessionRecording, session_recordings

@@ -130,7 +130,8 @@ def _default(field: FieldInfo) -> str:
 def configuration_reference() -> str:
     """The configuration reference: a heading per section (its dotted path, its docstring) and a table of its
     fields: name, type, default, range (the Field's ge/gt/le/lt) and description."""
-    from neoslam.config import ENV_NESTED_DELIMITER, ENV_PREFIX, NeoSLAMConfig
+    from neoslam.config import NeoSLAMConfig
+    from neoslam.config.loading import ENV_NESTED_DELIMITER, ENV_PREFIX
 
     lines: list[str] = []
     for path, model, many in _sections(NeoSLAMConfig, ""):

@@ -134,8 +134,9 @@ def simulate(
     quiet: QuietOption = False,
 ) -> None:
     """Turn a trajectory into what a stereo camera with a detector and visual odometry would record there."""
+    from neoslam.config.profiles import simulation_config
     from neoslam.io.atomic import check_target
-    from neoslam.jobs import record, simulate_dataset, simulation_config
+    from neoslam.jobs import record, simulate_dataset
 
     try:
         if trajectory is not None and route is not None:

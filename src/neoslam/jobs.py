@@ -10,10 +10,10 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
-from pydantic import BaseModel
 from tqdm import tqdm
 
-from neoslam.config import NOISE_PROFILES, MotionLimitsConfig, NeoSLAMConfig
+from neoslam.config import MotionLimitsConfig, NeoSLAMConfig
+from neoslam.config.profiles import simulation_config
 from neoslam.datasets.bag import BagSequence, is_bag, open_bag
 from neoslam.datasets.kitti import KittiSequence, is_kitti_root, read_kitti_sequence, sequences_in
 from neoslam.datasets.simulated import is_simulated_dataset, read_dataset, write_dataset
@@ -37,7 +37,6 @@ from neoslam.io.results import (
 from neoslam.io.trajectory_files import read_trajectory
 from neoslam.perception.frontend import ImageDataset, open_front_end
 from neoslam.pipeline import RunResult, run
-from neoslam.sim.profiles import DETECTION_PROFILES
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.sim.simulator import SimulatedRecording, simulate
 from neoslam.store.session import MapSession, check_map_path, map_session
@@ -77,37 +76,6 @@ class Dataset(Protocol):
     def __len__(self) -> int: ...
 
     def frames(self) -> Iterator[Frame]: ...
-
-
-def simulation_config(
-    config: NeoSLAMConfig, noise: str | None, seed: int | None, detector: str | None = None
-) -> NeoSLAMConfig:
-    """The config with a named odometry noise profile, a named detection profile (its detection and street values
-    replace the config's profile's, the values the config file set itself stay: a share of moving objects, say)
-    and a seed applied to its simulator section."""
-    update: dict[str, Any] = {}
-    if noise is not None:
-        if noise not in NOISE_PROFILES:
-            raise ConfigError(f"unknown noise profile {noise!r}; choose one of {', '.join(NOISE_PROFILES)}")
-        update |= {"noise_profile": noise, "odometry": NOISE_PROFILES[noise]}
-    if detector is not None:
-        if detector not in DETECTION_PROFILES:
-            raise ConfigError(f"unknown detection profile {detector!r}; choose one of {', '.join(DETECTION_PROFILES)}")
-        profile, current = DETECTION_PROFILES[detector], DETECTION_PROFILES[config.simulator.detection_profile]
-        update |= {
-            "detection_profile": detector,
-            "detection": _profile_with_own_values(profile.detection, current.detection, config.simulator.detection),
-            "world": _profile_with_own_values(profile.world, current.world, config.simulator.world),
-        }
-    if seed is not None:
-        update["seed"] = seed
-    return config.model_copy(update={"simulator": config.simulator.model_copy(update=update)})
-
-
-def _profile_with_own_values(profile: BaseModel, current: BaseModel, section: BaseModel) -> BaseModel:
-    """A profile's section with the values in which the config's section differs from its own profile's."""
-    own = {name: value for name, value in section if value != getattr(current, name)}
-    return profile.model_copy(update=own)
 
 
 def with_backend(config: NeoSLAMConfig, backend: str | None) -> NeoSLAMConfig:

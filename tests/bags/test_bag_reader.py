@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from neoslam.config.perception import BagConfig
 from neoslam.datasets import bag as bag_module
 from neoslam.datasets.bag import is_bag, open_bag, pair_by_stamp
 from neoslam.datasets.bag_messages import header_stamp_ns
 from neoslam.datasets.bag_topics import choose_topics
 from neoslam.errors import InputError
 from neoslam.geometry import make_pose
-from neoslam.perception.config import BagConfig
 
 FRAMES = 6
 EPOCH_NS = 1_600_000_000 * 10**9

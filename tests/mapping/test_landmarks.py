@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from neoslam.config import ExperienceMapConfig, NeoSLAMConfig, ObjectMapConfig, SimulatorConfig
+from neoslam.config.profiles import simulation_config
 from neoslam.datasets.simulated import read_dataset, write_dataset
 from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
 from neoslam.geometry import invert_pose
-from neoslam.jobs import simulation_config
 from neoslam.mapping.graph import Link, MapGraph
 from neoslam.mapping.landmarks import LandmarkSolver, landmark_key
 from neoslam.pipeline import NeoSLAM

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from neoslam.perception.config import DetectionPass, DetectorConfig
+from neoslam.config.perception import DetectionPass, DetectorConfig
 
 SMALL_PASS = DetectionPass(scale=416 / 1242)  # the whole frame shrunk to YOLOX-Nano's exported 416 px
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
+from neoslam.config.perception import DetectionPass, DetectorConfig
 from neoslam.errors import InputError
-from neoslam.perception.config import DetectionPass, DetectorConfig
 from neoslam.perception.detection import (
     COCO_CLASSES,
     PAD_VALUE,

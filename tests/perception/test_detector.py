@@ -10,9 +10,9 @@ import numpy as np
 import onnx
 import pytest
 
+from neoslam.config.perception import DetectionPass, DetectorConfig
 from neoslam.errors import ConfigError, InputError
 from neoslam.evaluation.detection import box_iou
-from neoslam.perception.config import DetectionPass, DetectorConfig
 from neoslam.perception.detection import COCO_CLASSES, Detection
 from neoslam.perception.detector import make_detector
 from neoslam.perception.grid_model import make_grid

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from neoslam.config import NeoSLAMConfig
+from neoslam.config.perception import PerceptionConfig
 from neoslam.datasets.kitti import KittiSequence, read_kitti_sequence
 from neoslam.errors import ConfigError, InputError
 from neoslam.geometry import transform_points
 from neoslam.io.frames import camera_points_to_robot
 from neoslam.io.trajectory_files import write_kitti
-from neoslam.perception.config import PerceptionConfig
 from neoslam.perception.detection import Detection
 from neoslam.perception.detections_file import write_detections_file
 from neoslam.perception.frontend import ImageDataset, PoseFileMotion, StereoMotion, open_front_end

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from neoslam.config import CameraConfig
-from neoslam.perception.config import DetectorConfig, StereoObjectConfig
+from neoslam.config.perception import DetectorConfig, StereoObjectConfig
 from neoslam.perception.detection import Detection
 from neoslam.perception.detector import make_detector
 from neoslam.perception.stereo import ObjectTriangulator, match_stereo_keypoints, triangulate

@@ -14,9 +14,9 @@ from typer.testing import CliRunner
 
 from neoslam.cli import app
 from neoslam.config import CameraConfig, DetectionNoiseConfig, SimulatorConfig, WorldConfig, load_config
+from neoslam.config.calibration import DEFAULT_DETECTION_PROFILE, DETECTION_PROFILES
 from neoslam.datasets.simulated import write_dataset
 from neoslam.sim.detections import FALSE_POSITIVE, DetectionSimulator
-from neoslam.sim.profiles import DEFAULT_DETECTION_PROFILE, DETECTION_PROFILES
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.sim.simulator import simulate
 from neoslam.sim.world import CLASS_SIZES, World, build_world

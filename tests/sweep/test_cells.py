@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from neoslam.config import NeoSLAMConfig, load_config
-from neoslam.jobs import simulation_config, with_backend
+from neoslam.config.profiles import simulation_config
+from neoslam.jobs import with_backend
 from neoslam.sweep import expand, parse_spec
 from neoslam.sweep.cells import axes_that_vary
 from neoslam.sweep.driver import _tasks

@@ -32,8 +32,8 @@ MAP_LAYERS = ("world/trajectory/odometry", "world/trajectory/corrected", "world/
 
 def _simulate(root: Path, frames: int) -> Path:
     from neoslam.config import NeoSLAMConfig
+    from neoslam.config.profiles import simulation_config
     from neoslam.io.trajectory_files import write_tum
-    from neoslam.jobs import simulation_config
     from neoslam.sim.routes import ROUTES, drive_route
 
     sim = simulation_config(NeoSLAMConfig(), "vo", 2, "ideal").simulator

@@ -23,6 +23,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from neoslam.config import CameraConfig
+from neoslam.config.perception import BagConfig
 from neoslam.datasets.bag_messages import (
     NS_PER_S,
     MessageError,
@@ -33,7 +34,6 @@ from neoslam.datasets.bag_messages import (
 )
 from neoslam.datasets.bag_topics import BagTopics, choose_topics
 from neoslam.errors import InputError, NeoSLAMError
-from neoslam.perception.config import BagConfig
 from neoslam.types import Trajectory
 
 __all__ = ["BagSequence", "BagTopics", "is_bag", "open_bag", "pair_by_stamp"]

@@ -25,8 +25,8 @@ from pydantic import ValidationError
 
 from neoslam.config import CameraConfig, describe_validation_error
 from neoslam.errors import InputError
-from neoslam.io.text import read_text
 from neoslam.io.trajectory_files import read_kitti, read_times
+from neoslam.text import read_text
 from neoslam.types import Trajectory
 
 __all__ = ["KittiSequence", "read_kitti_sequence", "read_calibration", "is_kitti_root", "sequences_in"]

@@ -28,9 +28,9 @@ from neoslam.geometry import integrate_body_velocities
 from neoslam.io.detection_checks import box_problem, centre_problem, label_problem, score_problem
 from neoslam.io.motion_limits import check_time_steps, check_velocities
 from neoslam.io.tables import numeric_column, read_table, write_table
-from neoslam.io.text import read_yaml
 from neoslam.io.trajectory_files import read_tum, write_tum
 from neoslam.sim.simulator import SimulatedRecording
+from neoslam.text import read_yaml
 from neoslam.types import Frame, ObjectObservation, Trajectory
 
 __all__ = ["FORMAT", "VERSION", "SimulatedDataset", "write_dataset", "read_dataset", "is_simulated_dataset"]

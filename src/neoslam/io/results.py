@@ -13,9 +13,9 @@ from neoslam.config import NeoSLAMConfig, dump_config
 from neoslam.errors import InputError
 from neoslam.geometry import pose_from_quaternion, quaternion_from_pose
 from neoslam.io.tables import numeric_column, read_table, write_table
-from neoslam.io.text import read_text
 from neoslam.io.trajectory_files import QUATERNION_NORM_TOLERANCE, write_kitti, write_tum
 from neoslam.mapping.object_map import MapObject
+from neoslam.text import read_text
 from neoslam.types import LoopClosure, Trajectory
 
 __all__ = [

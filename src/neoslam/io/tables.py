@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from neoslam.errors import InputError
-from neoslam.io.text import read_text
+from neoslam.text import read_text
 
 __all__ = ["read_table", "write_table", "numeric_column"]
 

@@ -15,7 +15,7 @@ import numpy as np
 from neoslam.errors import InputError, OutputError
 from neoslam.geometry import pose_from_quaternion, quaternion_from_pose
 from neoslam.io.frames import camera_poses_to_robot, robot_poses_to_camera
-from neoslam.io.text import read_text
+from neoslam.text import read_text
 from neoslam.types import Trajectory
 
 __all__ = [

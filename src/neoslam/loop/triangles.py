@@ -17,7 +17,7 @@ from itertools import combinations
 
 import numpy as np
 
-from neoslam.config import TRIANGLE_SIDE_BITS
+from neoslam.config.loop import TRIANGLE_SIDE_BITS
 from neoslam.types import Keyframe
 
 __all__ = ["TriangleIndex", "triangle_keys"]

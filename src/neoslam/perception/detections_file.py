@@ -27,8 +27,8 @@ import numpy as np
 
 from neoslam.errors import InputError
 from neoslam.io.detection_checks import box_problem, label_problem, score_problem
-from neoslam.io.text import read_text
 from neoslam.perception.detection import Detection
+from neoslam.text import read_text
 
 __all__ = ["DetectionsFile", "write_detections_file", "parse_line"]
 

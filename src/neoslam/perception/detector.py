@@ -16,8 +16,8 @@ from typing import Protocol
 
 import numpy as np
 
+from neoslam.config.perception import DetectorConfig
 from neoslam.errors import ConfigError
-from neoslam.perception.config import DetectorConfig
 from neoslam.perception.detection import Detection, Window, equalise_contrast, nms, to_bgr, touches_inner_cut
 
 __all__ = ["DetectionModel", "WindowedDetector", "make_detector", "windows_of"]

@@ -16,12 +16,12 @@ from typing import Protocol
 import numpy as np
 
 from neoslam.config import CameraConfig, MotionLimitsConfig
+from neoslam.config.perception import PerceptionConfig
 from neoslam.errors import ConfigError, InputError
 from neoslam.geometry import body_velocities, invert_pose
 from neoslam.io.frames import camera_poses_to_robot
 from neoslam.io.motion_limits import check_pose_steps
 from neoslam.io.trajectory_files import data_line_numbers, read_trajectory
-from neoslam.perception.config import PerceptionConfig
 from neoslam.perception.detection import ObjectDetector
 from neoslam.perception.detections_file import DetectionsFile
 from neoslam.perception.detector import make_detector

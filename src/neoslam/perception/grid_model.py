@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from neoslam.config.perception import DetectorConfig
 from neoslam.errors import InputError
-from neoslam.perception.config import DetectorConfig
 from neoslam.perception.detection import letterbox, load_class_names, network_size
 from neoslam.perception.onnx_session import open_session
 

@@ -24,8 +24,8 @@ import cv2
 import numpy as np
 
 from neoslam.config import CameraConfig
+from neoslam.config.perception import StereoOdometryConfig
 from neoslam.geometry import invert_pose, make_pose
-from neoslam.perception.config import StereoOdometryConfig
 from neoslam.perception.stereo import triangulate
 
 __all__ = [

@@ -15,7 +15,7 @@ import numpy as np
 
 from neoslam.boxes import covered_share
 from neoslam.config import CameraConfig
-from neoslam.perception.config import StereoObjectConfig
+from neoslam.config.perception import StereoObjectConfig
 from neoslam.perception.detection import Detection
 from neoslam.types import ObjectObservation
 

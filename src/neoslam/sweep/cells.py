@@ -15,7 +15,8 @@ from typing import Any
 from pydantic import ValidationError
 
 import neoslam
-from neoslam.config import MAP_SECTIONS, NOISE_PROFILES, NeoSLAMConfig, config_values, merge_settings
+from neoslam.config import MAP_SECTIONS, NeoSLAMConfig, config_values, merge_settings
+from neoslam.config.calibration import detection_profile, noise_profile
 from neoslam.errors import NeoSLAMError
 from neoslam.sweep.spec import AXES, Spec, _where
 
@@ -200,7 +201,7 @@ def _axis_values(noise: str | None, detector: str | None, seed: int | None) -> d
         return {}
     simulator = {
         "noise_profile": noise,
-        "odometry": NOISE_PROFILES[noise].model_dump(),
+        "odometry": noise_profile(noise).model_dump(),
         "detection_profile": detector,
         "seed": seed,
     }
@@ -208,15 +209,15 @@ def _axis_values(noise: str | None, detector: str | None, seed: int | None) -> d
 
 
 def _check_axes(spec: Spec) -> None:
-    from neoslam.sim.profiles import DETECTION_PROFILES
-
-    for axis, values, known, what in (
-        ("noise", spec.noise, NOISE_PROFILES, "noise profile"),
-        ("detectors", spec.detectors, DETECTION_PROFILES, "detection profile"),
+    for axis, values, lookup in (
+        ("noise", spec.noise, noise_profile),
+        ("detectors", spec.detectors, detection_profile),
     ):
         for i, value in enumerate(values):
-            if value not in known:
-                raise spec.error(f"{axis}[{i}]", f"unknown {what} {value!r}; choose one of {', '.join(known)}")
+            try:
+                lookup(value)
+            except ValueError as error:
+                raise spec.error(f"{axis}[{i}]", str(error)) from None
 
 
 def _check_overrides(spec: Spec, base: dict[str, Any]) -> None:

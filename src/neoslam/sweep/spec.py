@@ -35,7 +35,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from neoslam.errors import ConfigError, InputError
-from neoslam.io.text import read_yaml
+from neoslam.text import read_yaml
 
 __all__ = ["AXES", "DEFAULT_METRICS", "SourceSpec", "CellPick", "Spec", "SpecError", "load_spec", "data_root"]
 

@@ -6,7 +6,9 @@ import os
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
+
+from neoslam.config.base import Section
 
 __all__ = [
     "DetectionPass",
@@ -18,11 +20,6 @@ __all__ = [
 ]
 
 
-class _Section(BaseModel):
-    # allow_inf_nan=False: .inf or .nan is refused with the field's name (as in neoslam.config).
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
-
-
 DATA_ENV = "NEOSLAM_DATA"  # where the shared data (models among it) lives
 DEFAULT_DATA = Path("../shared/data")  # without NEOSLAM_DATA, relative to the working directory
 DEFAULT_MODELS = {
@@ -31,7 +28,7 @@ DEFAULT_MODELS = {
 }
 
 
-class DetectionPass(_Section):
+class DetectionPass(Section):
     """A window of the image that the network sees, enlarged by `scale` (the network input is the window's size
     times the scale, rounded up to a multiple of 32 px)."""
 
@@ -47,7 +44,7 @@ class DetectionPass(_Section):
         return self
 
 
-class DetectorConfig(_Section):
+class DetectorConfig(Section):
     """Object detection: a YOLO network through onnxruntime, or detections read from a file (paper: YOLO)."""
 
     source: Literal["yolox", "yolo11", "file"] = Field(
@@ -118,7 +115,7 @@ class DetectorConfig(_Section):
         return Path(os.environ.get(DATA_ENV, DEFAULT_DATA)) / DEFAULT_MODELS.get(self.source, DEFAULT_MODELS["yolox"])
 
 
-class StereoObjectConfig(_Section):
+class StereoObjectConfig(Section):
     """ORB keypoints in each left box matched along the rectified epipolar line, then triangulated (paper 3.1)."""
 
     orb_features: int = Field(300, gt=0, le=100_000, description="most ORB keypoints detected in one box")
@@ -171,7 +168,7 @@ class StereoObjectConfig(_Section):
     patch_size: int = Field(16, gt=1, le=256, description="side of the grey appearance patch, px (as the simulator's)")
 
 
-class StereoOdometryConfig(_Section):
+class StereoOdometryConfig(Section):
     """Stereo visual odometry: corners tracked frame to frame, stereo depth, PnP with RANSAC (paper: viso2)."""
 
     source: Literal["stereo", "poses"] = Field("stereo", description="stereo: from the images; poses: --odometry")
@@ -201,7 +198,7 @@ class StereoOdometryConfig(_Section):
     mask_objects: bool = Field(True, description="ignore corners inside detected boxes (objects may move)")
 
 
-class BagConfig(_Section):
+class BagConfig(Section):
     """Reading a ROS 1 or ROS 2 bag: how left and right images pair into stereo frames and how the optional
     odometry topic is sampled at the images' stamps."""
 
@@ -222,7 +219,7 @@ class BagConfig(_Section):
     )
 
 
-class PerceptionConfig(_Section):
+class PerceptionConfig(Section):
     """The front end that turns stereo images into frames and object observations."""
 
     detector: DetectorConfig = DetectorConfig()

@@ -19,9 +19,17 @@ from typing import Any
 
 from pydantic import BaseModel
 
-from neoslam.config import DetectionNoiseConfig, WorldConfig
+from neoslam.config.simulated_world import DetectionNoiseConfig, OdometryNoiseConfig, WorldConfig
 
-__all__ = ["DetectionProfile", "DETECTION_PROFILES", "DEFAULT_DETECTION_PROFILE", "with_detection_profile"]
+__all__ = [
+    "DetectionProfile",
+    "DETECTION_PROFILES",
+    "DEFAULT_DETECTION_PROFILE",
+    "NOISE_PROFILES",
+    "detection_profile",
+    "noise_profile",
+    "with_detection_profile",
+]
 
 DEFAULT_DETECTION_PROFILE = "real"
 
@@ -83,11 +91,40 @@ def _over(base: BaseModel, given: Any) -> Any:
 
 def with_detection_profile(data: dict[str, Any]) -> dict[str, Any]:
     """Simulator settings whose `detection` and `world` start from the named profile's values."""
-    name = data.get("detection_profile", DEFAULT_DETECTION_PROFILE)
-    if name not in DETECTION_PROFILES:
-        raise ValueError(f"unknown detection profile {name!r}; choose one of {', '.join(DETECTION_PROFILES)}")
-    profile = DETECTION_PROFILES[name]
+    profile = detection_profile(data.get("detection_profile", DEFAULT_DETECTION_PROFILE))
     return data | {
         "detection": _over(profile.detection, data.get("detection")),
         "world": _over(profile.world, data.get("world")),
     }
+
+
+NOISE_PROFILES: dict[str, OdometryNoiseConfig] = {
+    "none": OdometryNoiseConfig(
+        sigma_speed=0.0,
+        sigma_yaw_rate=0.0,
+        speed_scale_bias=0.0,
+        yaw_rate_bias=0.0,
+        sigma_vertical_speed=0.0,
+        sigma_pitch_rate=0.0,
+    ),
+    "vo": OdometryNoiseConfig(),
+    "heavy": OdometryNoiseConfig(sigma_speed=1.0, sigma_yaw_rate=0.1, sigma_vertical_speed=0.1, sigma_pitch_rate=0.01),
+    # The upper ends of the paper's noise (section 4.3: 0..1 m/s and 0..0.5 rad/s).
+    "paper-max": OdometryNoiseConfig(
+        sigma_speed=1.0, sigma_yaw_rate=0.5, sigma_vertical_speed=0.1, sigma_pitch_rate=0.01
+    ),
+}
+
+
+def detection_profile(name: str) -> DetectionProfile:
+    """The named detection profile; ValueError naming the known ones otherwise."""
+    if name not in DETECTION_PROFILES:
+        raise ValueError(f"unknown detection profile {name!r}; choose one of {', '.join(DETECTION_PROFILES)}")
+    return DETECTION_PROFILES[name]
+
+
+def noise_profile(name: str) -> OdometryNoiseConfig:
+    """The named odometry noise profile; ValueError naming the known ones otherwise."""
+    if name not in NOISE_PROFILES:
+        raise ValueError(f"unknown noise profile {name!r}; choose one of {', '.join(NOISE_PROFILES)}")
+    return NOISE_PROFILES[name]
