@@ -3,7 +3,7 @@
 import numpy as np
 
 from neoslam import Frame, NeoSLAM, ObjectObservation, load_config
-from neoslam.io.frames import robot_points_to_camera
+from neoslam.geometry import robot_points_to_camera
 
 slam = NeoSLAM(load_config())  # the defaults; load_config(Path("my.yaml")) reads a file as --config does
 parked_cars = np.array([[x, side * 4.0, -1.65] for x in range(10, 200, 7) for side in (-1, 1)])  # world, m

@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 from neoslam.config import NeoSLAMConfig
-from neoslam.geometry import invert_pose, transform_points
-from neoslam.io.frames import robot_points_to_camera
+from neoslam.geometry import invert_pose, robot_points_to_camera, transform_points
 from neoslam.io.results import OBJECT_COLUMNS, write_objects
 from neoslam.io.tables import read_table
 from neoslam.pipeline import RunResult, run

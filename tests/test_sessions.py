@@ -16,7 +16,7 @@ from neoslam.geometry import invert_pose
 from neoslam.pipeline import NeoSLAM, RunResult
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.sim.sessions import SessionRecording, session_recordings
-from neoslam.store.records import MapState
+from neoslam.types import MapState
 
 TRUE_PLACE_M = 5.0  # a closure is true when its two frames are this close in the ground truth
 SAME_PLACE_M = 2.0  # a frame of B drives A's street when it passes this close to a frame of A (ground truth)

@@ -30,8 +30,7 @@ from neoslam.mapping.experience_map import CellState, ExperienceMap, Revisit
 from neoslam.mapping.moving_objects import MovingObjectDetector
 from neoslam.mapping.object_map import MapObject, ObjectMap
 from neoslam.sessions import StoredMap
-from neoslam.store.records import MapState, SessionRecord
-from neoslam.types import Frame, Keyframe, LoopClosure, Trajectory
+from neoslam.types import Frame, Keyframe, LoopClosure, MapState, SessionRecord, Trajectory
 
 __all__ = ["NeoSLAM", "RunResult", "StepObserver", "run", "object_vectors"]
 

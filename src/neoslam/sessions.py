@@ -20,8 +20,7 @@ from neoslam.config import NeoSLAMConfig
 from neoslam.geometry import invert_pose
 from neoslam.loop.index import KeyframeIndex
 from neoslam.loop.relocaliser import MapRelocaliser
-from neoslam.store.records import MapState, SessionRecord, StoredClosure
-from neoslam.types import Keyframe, LoopClosure
+from neoslam.types import Keyframe, LoopClosure, MapState, SessionRecord, StoredClosure
 
 if TYPE_CHECKING:
     from neoslam.pipeline import NeoSLAM

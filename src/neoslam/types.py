@@ -3,12 +3,13 @@
 Frames: inside NeoSLAM every pose is a 4x4 homogeneous matrix T_world_robot in the robot frame of REP-103
 (x forward, y left, z up); the robot frame's origin is the left camera's optical centre. Object centres measured
 by the stereo camera stay in the camera's optical frame (x right, y down, z forward) until they are moved to the
-world; `neoslam.io.frames` holds the only conversions between the two.
+world; `neoslam.geometry` holds the only conversions between the two.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 
@@ -19,6 +20,12 @@ __all__ = [
     "Experience",
     "LoopClosure",
     "Trajectory",
+    "Link",
+    "HebbianTrace",
+    "SessionRecord",
+    "StoredClosure",
+    "ObjectMapState",
+    "MapState",
 ]
 
 
@@ -145,3 +152,99 @@ class Trajectory:
 
     def subset(self, indices: np.ndarray) -> Trajectory:
         return Trajectory(self.timestamps[indices], self.poses[indices])
+
+
+LinkKind = Literal["odometry", "loop"]
+
+
+@dataclass(frozen=True, slots=True)
+class Link:
+    """A measured relative pose T_source_target between two experiences."""
+
+    source: int
+    target: int
+    relative: np.ndarray  # (4, 4)
+    kind: LinkKind
+    distance_m: float  # travelled along an odometry link (its uncertainty grows with it); 0 for a loop link
+
+
+@dataclass(slots=True)
+class HebbianTrace:
+    """One keyframe's association: the sparse max-marginals of β_k and the cell state it was learnt with."""
+
+    gc_indices: np.ndarray
+    gc_weights: np.ndarray
+    hd_indices: np.ndarray
+    hd_weights: np.ndarray
+    gc_peak: tuple[int, int, int]
+    hd_peak: int
+    strength: float
+
+    @property
+    def nbytes(self) -> int:
+        return self.gc_indices.nbytes + self.gc_weights.nbytes + self.hd_indices.nbytes + self.hd_weights.nbytes
+
+
+# What a stored map holds, as plain records and arrays: the contract between NeoSLAM's components (which export
+# and restore them) and the map file (which writes and reads them).
+
+
+@dataclass(frozen=True, slots=True)
+class SessionRecord:
+    """One run that made or extended the map. Ids count from 1 in the order the sessions ran."""
+
+    id: int
+    name: str  # the dataset's name
+    frames: int  # frames processed (so far, while the session runs)
+    relocalised_frame: int | None  # the session's frame at which it joined the stored map; None: never (yet)
+
+
+@dataclass(frozen=True, slots=True)
+class StoredClosure:
+    """A loop closure accepted into the map, with the sessions of its two keyframes."""
+
+    session: int  # the session that made it (its query keyframe's)
+    match_session: int  # the session of the stored keyframe it recognised
+    closure: LoopClosure
+
+
+@dataclass
+class ObjectMapState:
+    """The object map's arrays (see neoslam.mapping.object_map): one row per object ever made, and the observation
+    sums per (object, experience) in the experience's frame, from which positions follow the corrected map."""
+
+    labels: list[str] = field(default_factory=list)
+    sums: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (n, 3) weighted world sums
+    weights: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (n,)
+    counts: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))  # (n,) 0: merged away or forgotten
+    pair_object: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))  # (p,)
+    pair_experience: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))  # (p,)
+    pair_sums: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (p, 3) in the experience's frame
+    pair_weights: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (p,)
+    pair_counts: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))  # (p,)
+
+
+@dataclass
+class MapState:
+    """Everything a map holds. Keyframe, experience and object ids are unique over all sessions; an experience's
+    `session` names the session that made it (a keyframe's session is its experience's)."""
+
+    sessions: list[SessionRecord] = field(default_factory=list)
+    keyframes: list[Keyframe] = field(default_factory=list)  # stored keyframes, ids increasing
+    keyframe_experience: dict[int, int] = field(default_factory=dict)  # keyframe id -> its experience
+    experiences: list[Experience] = field(default_factory=list)  # ids 0..n-1; .pose is the odometry pose
+    experience_poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 4)))  # corrected, map frame
+    links: list[Link] = field(default_factory=list)
+    closures: list[StoredClosure] = field(default_factory=list)
+    objects: ObjectMapState = field(default_factory=ObjectMapState)
+    hebbian: dict[int, HebbianTrace] = field(default_factory=dict)  # keyframe id -> its association
+    object_vector_weights: dict[str, np.ndarray] = field(default_factory=dict)  # OVCN parameters by name
+    object_vector_losses: list[float] = field(default_factory=list)  # per epoch trained
+
+    @property
+    def next_session(self) -> int:
+        return max((s.id for s in self.sessions), default=0) + 1
+
+    @property
+    def next_keyframe(self) -> int:
+        return max((k.id for k in self.keyframes), default=-1) + 1

@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 from neoslam.config import KeyframeConfig
-from neoslam.geometry import transform_points
-from neoslam.io.frames import robot_points_to_camera
+from neoslam.geometry import robot_points_to_camera, transform_points
 from neoslam.loop.keyframes import KeyframeBuilder, LocalObjectWindow
 from neoslam.types import ObjectObservation
 

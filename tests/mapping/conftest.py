@@ -10,7 +10,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from neoslam.geometry import make_pose, relative_pose
-from neoslam.mapping.graph import Link, MapGraph
+from neoslam.mapping.graph import MapGraph
+from neoslam.types import Link
 
 
 def _yaw_pose(yaw: float, translation=(0.0, 0.0, 0.0)) -> np.ndarray:

@@ -7,7 +7,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from neoslam.geometry import invert_pose, make_pose, relative_pose
-from neoslam.mapping.graph import Link, MapGraph
+from neoslam.mapping.graph import MapGraph
+from neoslam.types import Link
 
 
 def pose(yaw: float, translation, roll: float = 0.0, pitch: float = 0.0) -> np.ndarray:

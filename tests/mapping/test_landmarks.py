@@ -14,13 +14,13 @@ from neoslam.config.profiles import simulation_config
 from neoslam.datasets.simulated import read_dataset, write_dataset
 from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
 from neoslam.geometry import invert_pose
-from neoslam.mapping.graph import Link, MapGraph
+from neoslam.mapping.graph import MapGraph
 from neoslam.mapping.landmarks import LandmarkSolver, landmark_key
 from neoslam.pipeline import NeoSLAM
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.sim.sessions import session_recordings
 from neoslam.sim.simulator import simulate_route
-from neoslam.store.records import ObjectMapState
+from neoslam.types import Link, ObjectMapState
 
 SIGHT_M = 15.0  # nodes see the objects this close
 VIEW_SIGMA_M = 0.3  # each view's std (the object map's position_sigma_floor)

@@ -8,8 +8,7 @@ import pytest
 from pydantic import ValidationError
 
 from neoslam.config import KeyframeConfig, MovingObjectsConfig, NeoSLAMConfig, ObjectMapConfig
-from neoslam.geometry import invert_pose, transform_points
-from neoslam.io.frames import robot_points_to_camera
+from neoslam.geometry import invert_pose, robot_points_to_camera, transform_points
 from neoslam.loop.keyframes import LocalObjectWindow
 from neoslam.mapping.moving_objects import MovingObjectDetector
 from neoslam.types import Frame, ObjectObservation

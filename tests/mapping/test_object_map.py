@@ -8,8 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from neoslam.config import ObjectMapConfig
-from neoslam.geometry import invert_pose, make_pose, transform_points
-from neoslam.io.frames import camera_points_to_robot, robot_points_to_camera
+from neoslam.geometry import camera_points_to_robot, invert_pose, make_pose, robot_points_to_camera, transform_points
 from neoslam.mapping.object_map import ObjectMap
 from neoslam.types import ObjectObservation
 

@@ -8,8 +8,9 @@ from scipy.spatial.transform import Rotation
 
 from neoslam.config import ExperienceMapConfig
 from neoslam.geometry import make_pose
-from neoslam.mapping.graph import Link, MapGraph
+from neoslam.mapping.graph import MapGraph
 from neoslam.mapping.pose_graph import ROLL_PITCH_SIGMA_RAD, link_sigmas, optimise_pose_graph
+from neoslam.types import Link
 
 WRONG_OFFSET_M = 20.0
 

@@ -8,9 +8,9 @@ from scipy.spatial.transform import Rotation
 
 from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
 from neoslam.geometry import make_pose, relative_pose, yaw_pitch_roll
-from neoslam.mapping.graph import Link, MapGraph
+from neoslam.mapping.graph import MapGraph
 from neoslam.mapping.relaxation import link_measurement, relax
-from neoslam.types import Trajectory
+from neoslam.types import Link, Trajectory
 
 CORRECTION = 0.5  # NeuroSLAM's EXP_CORRECTION
 PASSES = 5  # NeuroSLAM's EXP_LOOPS

@@ -12,8 +12,7 @@ from neoslam.config import NeoSLAMConfig
 from neoslam.config.perception import PerceptionConfig
 from neoslam.datasets.kitti import KittiSequence, read_kitti_sequence
 from neoslam.errors import ConfigError, InputError
-from neoslam.geometry import transform_points
-from neoslam.io.frames import camera_points_to_robot
+from neoslam.geometry import camera_points_to_robot, transform_points
 from neoslam.io.trajectory_files import write_kitti
 from neoslam.perception.detection import Detection
 from neoslam.perception.detections_file import write_detections_file

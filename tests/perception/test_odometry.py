@@ -12,8 +12,7 @@ import pytest
 from neoslam.config import CameraConfig
 from neoslam.config.perception import StereoOdometryConfig
 from neoslam.datasets.kitti import KittiSequence, read_kitti_sequence
-from neoslam.geometry import relative_pose, rotation_angle, yaw_of
-from neoslam.io.frames import camera_poses_to_robot
+from neoslam.geometry import camera_poses_to_robot, relative_pose, rotation_angle, yaw_of
 from neoslam.perception.odometry import (
     StereoOdometry,
     box_mask,

@@ -10,7 +10,7 @@ import pytest
 
 from neoslam.config import CameraConfig, DetectionNoiseConfig
 from neoslam.datasets.simulated import DETECTION_COLUMNS, OBJECT_COLUMNS
-from neoslam.io.frames import robot_points_to_camera
+from neoslam.geometry import robot_points_to_camera
 from neoslam.io.tables import numeric_column, read_table
 from neoslam.io.trajectory_files import read_tum
 from neoslam.sim.camera import StereoCamera

@@ -10,10 +10,17 @@ from functools import cache
 import numpy as np
 import pytest
 
-from neoslam.cells.hebbian import HebbianTrace
-from neoslam.mapping.graph import Link
-from neoslam.store.records import MapState, ObjectMapState, SessionRecord, StoredClosure
-from neoslam.types import Experience, Keyframe, LoopClosure
+from neoslam.types import (
+    Experience,
+    HebbianTrace,
+    Keyframe,
+    Link,
+    LoopClosure,
+    MapState,
+    ObjectMapState,
+    SessionRecord,
+    StoredClosure,
+)
 
 LABELS = ("car", "truck", "person", "bicycle")
 

@@ -16,7 +16,7 @@ from neoslam.config import NeoSLAMConfig
 from neoslam.errors import InputError, OutputError
 from neoslam.store import map_file as map_file_module
 from neoslam.store.map_file import MapFile
-from neoslam.store.records import MapState, ObjectMapState
+from neoslam.types import MapState, ObjectMapState
 
 CONFIG = NeoSLAMConfig()
 

@@ -16,7 +16,7 @@ import pytest
 
 from neoslam.config import NeoSLAMConfig
 from neoslam.store.map_file import MapFile
-from neoslam.store.records import MapState
+from neoslam.types import MapState
 
 KILLS = 24
 SEED = 13

@@ -21,6 +21,7 @@ import numpy as np
 
 from neoslam.cells.attractor import peak_cell
 from neoslam.config import HebbianConfig
+from neoslam.types import HebbianTrace
 
 __all__ = ["HebbianMemory", "HebbianRecall", "HebbianTrace"]
 
@@ -48,23 +49,6 @@ class HebbianRecall:
     def gc_cells(self) -> np.ndarray:
         """(n, 3) integer (x, y, z) cells of gc_indices, as GridCells.inject_pattern takes them."""
         return np.stack(np.unravel_index(self.gc_indices, self.gc_shape), axis=1)
-
-
-@dataclass(slots=True)
-class HebbianTrace:
-    """One keyframe's association: the sparse max-marginals of β_k and the cell state it was learnt with."""
-
-    gc_indices: np.ndarray
-    gc_weights: np.ndarray
-    hd_indices: np.ndarray
-    hd_weights: np.ndarray
-    gc_peak: tuple[int, int, int]
-    hd_peak: int
-    strength: float
-
-    @property
-    def nbytes(self) -> int:
-        return self.gc_indices.nbytes + self.gc_weights.nbytes + self.hd_indices.nbytes + self.hd_weights.nbytes
 
 
 def _packet(activity: np.ndarray, sparsity: float, name: str) -> tuple[np.ndarray, float]:

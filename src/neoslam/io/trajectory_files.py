@@ -1,7 +1,7 @@
 """Read and write trajectories as TUM and KITTI text files, with KITTI `times.txt` timestamps.
 
 TUM files (`t x y z qx qy qz qw`) hold robot poses (REP-103) and are used as they are. KITTI files hold camera
-poses (x right, y down, z forward) and go through `neoslam.io.frames` on the way in and out. Every problem
+poses (x right, y down, z forward) and go through `neoslam.geometry` on the way in and out. Every problem
 with an input file is an `InputError` naming the file and, where there is one, the 1-based line.
 """
 
@@ -13,8 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from neoslam.errors import InputError, OutputError
-from neoslam.geometry import pose_from_quaternion, quaternion_from_pose
-from neoslam.io.frames import camera_poses_to_robot, robot_poses_to_camera
+from neoslam.geometry import camera_poses_to_robot, pose_from_quaternion, quaternion_from_pose, robot_poses_to_camera
 from neoslam.text import read_text
 from neoslam.types import Trajectory
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from neoslam.config import KeyframeConfig
-from neoslam.io.frames import camera_points_to_robot
+from neoslam.geometry import camera_points_to_robot
 from neoslam.types import Keyframe, ObjectObservation
 
 __all__ = ["LocalObjectWindow", "KeyframeBuilder", "footprint_radii", "object_centres", "view_covariances"]

@@ -16,11 +16,12 @@ from typing import Protocol
 import numpy as np
 
 from neoslam.config import ExperienceMapConfig
-from neoslam.mapping.graph import Link, MapGraph
+from neoslam.mapping.graph import MapGraph
 from neoslam.mapping.landmarks import LOOP_ITERATIONS, LandmarkSolver, ObservationSource
 from neoslam.mapping.parts import MapParts
 from neoslam.mapping.pose_graph import optimise_pose_graph
 from neoslam.mapping.relaxation import LinkMeasurement, link_measurement, relax
+from neoslam.types import Link
 
 __all__ = ["MapBackend", "CorrectedMap"]
 

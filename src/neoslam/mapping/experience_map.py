@@ -42,10 +42,9 @@ import numpy as np
 from neoslam.config import ExperienceMapConfig
 from neoslam.geometry import invert_pose, rotation_angle, yaw_of
 from neoslam.mapping.backend import MapBackend
-from neoslam.mapping.graph import Link, MapGraph
+from neoslam.mapping.graph import MapGraph
 from neoslam.mapping.parts import MapParts
-from neoslam.store.records import MapState
-from neoslam.types import Experience, LoopClosure, Trajectory
+from neoslam.types import Experience, Link, LoopClosure, MapState, Trajectory
 
 __all__ = ["CellState", "ExperienceMap", "Revisit"]
 

@@ -3,26 +3,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
 
 import numpy as np
 
 from neoslam.geometry import invert_pose
+from neoslam.types import Link
 
-__all__ = ["Link", "MapGraph"]
-
-LinkKind = Literal["odometry", "loop"]
-
-
-@dataclass(frozen=True, slots=True)
-class Link:
-    """A measured relative pose T_source_target between two experiences."""
-
-    source: int
-    target: int
-    relative: np.ndarray  # (4, 4)
-    kind: LinkKind
-    distance_m: float  # travelled along an odometry link (its uncertainty grows with it); 0 for a loop link
+__all__ = ["MapGraph"]
 
 
 @dataclass

@@ -47,7 +47,7 @@ from neoslam.config import ExperienceMapConfig, ObjectMapConfig
 from neoslam.loop.keyframes import footprint_radii
 from neoslam.mapping.graph import MapGraph
 from neoslam.mapping.pose_graph import ANCHOR_SIGMA, link_noise_model, poses_from_values
-from neoslam.store.records import ObjectMapState
+from neoslam.types import ObjectMapState
 
 __all__ = ["LOOP_ITERATIONS", "LandmarkSolver", "ObservationSource", "landmark_key"]
 

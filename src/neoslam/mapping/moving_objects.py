@@ -44,8 +44,7 @@ from __future__ import annotations
 import numpy as np
 
 from neoslam.config import MovingObjectsConfig, ObjectMapConfig
-from neoslam.geometry import transform_points
-from neoslam.io.frames import camera_points_to_robot
+from neoslam.geometry import camera_points_to_robot, transform_points
 from neoslam.loop.keyframes import LocalObjectWindow, object_centres
 from neoslam.mapping.object_map import MapObject, depth_sigmas
 from neoslam.mapping.odometry_noise import OdometryNoiseEstimate

@@ -26,11 +26,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from neoslam.config import ObjectMapConfig
-from neoslam.geometry import transform_points
-from neoslam.io.frames import camera_points_to_robot
+from neoslam.geometry import camera_points_to_robot, transform_points
 from neoslam.loop.keyframes import object_centres
-from neoslam.store.records import ObjectMapState
-from neoslam.types import ObjectObservation
+from neoslam.types import ObjectMapState, ObjectObservation
 
 __all__ = ["MapObject", "ObjectMap", "depth_sigmas"]
 

@@ -14,7 +14,8 @@ import gtsam
 import numpy as np
 
 from neoslam.config import ExperienceMapConfig
-from neoslam.mapping.graph import Link, MapGraph
+from neoslam.mapping.graph import MapGraph
+from neoslam.types import Link
 
 __all__ = [
     "LoopResidual",

@@ -17,7 +17,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from neoslam.geometry import yaw_of
-from neoslam.mapping.graph import Link, MapGraph
+from neoslam.mapping.graph import MapGraph
+from neoslam.types import Link
 
 __all__ = ["LinkMeasurement", "link_measurement", "relax"]
 

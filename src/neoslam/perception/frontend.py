@@ -18,8 +18,7 @@ import numpy as np
 from neoslam.config import CameraConfig, MotionLimitsConfig
 from neoslam.config.perception import PerceptionConfig
 from neoslam.errors import ConfigError, InputError
-from neoslam.geometry import body_velocities, invert_pose
-from neoslam.io.frames import camera_poses_to_robot
+from neoslam.geometry import body_velocities, camera_poses_to_robot, invert_pose
 from neoslam.io.motion_limits import check_pose_steps
 from neoslam.io.trajectory_files import data_line_numbers, read_trajectory
 from neoslam.perception.detection import ObjectDetector

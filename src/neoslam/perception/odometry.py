@@ -13,7 +13,7 @@ The current frame's corners and depths become the next step's previous ones, so 
 corners and matched in stereo once; the tracking starts from the constant-velocity prediction of each corner
 (`predict_pixels`), which keeps near, fast-moving points. (OpenCV's Python binding takes no prebuilt pyramids,
 so those are built per LK call.) Poses are in the camera optical frame (x right, y down,
-z forward); `neoslam.io.frames.camera_poses_to_robot` turns them into robot poses.
+z forward); `neoslam.geometry.camera_poses_to_robot` turns them into robot poses.
 """
 
 from __future__ import annotations

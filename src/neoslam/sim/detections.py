@@ -10,7 +10,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from neoslam.config import CameraConfig, DetectionNoiseConfig
-from neoslam.io.frames import robot_points_to_camera
+from neoslam.geometry import robot_points_to_camera
 from neoslam.sim.camera import MIN_CORNER_DEPTH, StereoCamera
 from neoslam.sim.visibility import column_offset, cut_off, hidden
 from neoslam.sim.world import World

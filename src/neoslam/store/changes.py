@@ -10,8 +10,6 @@ from typing import Any
 
 import numpy as np
 
-from neoslam.cells.hebbian import HebbianTrace
-from neoslam.store.records import MapState, ObjectMapState, SessionRecord
 from neoslam.store.schema import (
     F8,
     FLOAT_DTYPES,
@@ -24,7 +22,7 @@ from neoslam.store.schema import (
     link_row,
     session_row,
 )
-from neoslam.types import Keyframe
+from neoslam.types import HebbianTrace, Keyframe, MapState, ObjectMapState, SessionRecord
 
 __all__ = ["WrittenState"]
 

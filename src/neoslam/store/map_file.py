@@ -55,9 +55,9 @@ from neoslam import __version__
 from neoslam.config import NeoSLAMConfig
 from neoslam.errors import InputError, OutputError
 from neoslam.store.changes import WrittenState
-from neoslam.store.records import MapState
 from neoslam.store.schema import APPLICATION_ID, FORMAT_TAG, FORMAT_VERSION, STATEMENTS, TABLES, read_state
 from neoslam.store.validation import MAP_SECTIONS, locked, read_header, validate
+from neoslam.types import MapState
 
 __all__ = ["MAP_SECTIONS", "MapFile"]
 

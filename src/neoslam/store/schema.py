@@ -15,10 +15,17 @@ from typing import Any
 
 import numpy as np
 
-from neoslam.cells.hebbian import HebbianTrace
-from neoslam.mapping.graph import Link
-from neoslam.store.records import MapState, ObjectMapState, SessionRecord, StoredClosure
-from neoslam.types import Experience, Keyframe, LoopClosure
+from neoslam.types import (
+    Experience,
+    HebbianTrace,
+    Keyframe,
+    Link,
+    LoopClosure,
+    MapState,
+    ObjectMapState,
+    SessionRecord,
+    StoredClosure,
+)
 
 __all__ = [
     "FORMAT_TAG",

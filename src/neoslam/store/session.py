@@ -13,8 +13,7 @@ from neoslam.config import NeoSLAMConfig
 from neoslam.errors import InputError, OutputError
 from neoslam.io.atomic import check_target_file
 from neoslam.store.map_file import MapFile
-from neoslam.store.records import MapState
-from neoslam.types import Frame
+from neoslam.types import Frame, MapState
 
 __all__ = ["MapRecorder", "MapSession", "check_map_path", "map_session"]
 

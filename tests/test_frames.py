@@ -5,13 +5,16 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from neoslam.geometry import is_rotation_matrix, make_pose, transform_points, yaw_of
-from neoslam.io.frames import (
+from neoslam.geometry import (
     ROBOT_FROM_CAMERA,
     camera_points_to_robot,
     camera_poses_to_robot,
+    is_rotation_matrix,
+    make_pose,
     robot_points_to_camera,
     robot_poses_to_camera,
+    transform_points,
+    yaw_of,
 )
 
 
