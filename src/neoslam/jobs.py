@@ -39,7 +39,7 @@ from neoslam.perception.frontend import ImageDataset, open_front_end
 from neoslam.pipeline import RunResult, run
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.sim.simulator import SimulatedRecording, simulate
-from neoslam.store.session import MapSession, check_map_path, map_session
+from neoslam.store.recording import MapRecording, check_map_path, map_recording
 from neoslam.types import Frame, Trajectory
 from neoslam.viz.plots import (
     plot_error_along_route,
@@ -224,7 +224,7 @@ def _metrics(dataset: Dataset, result: RunResult, config: NeoSLAMConfig, wall_s:
     return metrics
 
 
-def _session_metrics(session: MapSession, result: RunResult) -> dict[str, Any]:
+def _session_metrics(session: MapRecording, result: RunResult) -> dict[str, Any]:
     """Which session of the map file the run was, and whether (at which frame) it relocalised in the stored map."""
     record = result.session
     in_map_frame = record.id == 1 or record.relocalised_frame is not None  # the first session's frame is the map's
@@ -326,7 +326,7 @@ def run_dataset(
             data = staging / "dataset"
         dataset = _load(data, config, inputs)
         viewer = recording_target(rerun, out, staging)
-        kept = map_session(map_path, config, localise_only) if map_path is not None else nullcontext(None)
+        kept = map_recording(map_path, config, localise_only) if map_path is not None else nullcontext(None)
         with kept as session, rerun_session(viewer, dataset, overwrite, [data, *inputs.files(), *read]) as on_step:
             stored = session.stored if session is not None else None
             recorder = session.recorder if session is not None else None

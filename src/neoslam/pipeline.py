@@ -1,6 +1,6 @@
 """NeoSLAM: `step(frame)` reads as the paper's steps; `run(frames)` drives it with a progress bar.
 
-Built so far: path integration in the head-direction and grid cells (paper 3.3, NeuroSLAM), object keyframes and
+The system: path integration in the head-direction and grid cells (paper 3.3, NeuroSLAM), object keyframes and
 loop closure by graph matching (3.2), the object-vector cells learning their firing field from keyframe objects
 (3.4), the Hebbian association of keyframes with the cells (3.5), and the object experience map corrected at each
 loop (3.6), whose corrected trajectory is the estimate.
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from tqdm import tqdm
@@ -29,8 +29,8 @@ from neoslam.loop.keyframes import KeyframeBuilder
 from neoslam.mapping.experience_map import CellState, ExperienceMap, Revisit
 from neoslam.mapping.moving_objects import MovingObjectDetector
 from neoslam.mapping.object_map import MapObject, ObjectMap
-from neoslam.sessions import StoredMap
-from neoslam.types import Frame, Keyframe, LoopClosure, MapState, SessionRecord, Trajectory
+from neoslam.relocalisation import StoredMapRelocalisation
+from neoslam.types import Frame, Keyframe, LoopClosure, MapState, SessionRecord, StoredClosure, Trajectory
 
 __all__ = ["NeoSLAM", "RunResult", "StepObserver", "run", "object_vectors"]
 
@@ -113,8 +113,22 @@ class NeoSLAM:
         # estimate (3x4 rows each), decoded cells (x, y, z, heading).
         self._chunks: list[np.ndarray] = []
         self._recorded = 0
-        self.stored_map = StoredMap(config, stored, session_name)
-        self.stored_map.restore(self)
+        self.stored = stored
+        self.session = SessionRecord(stored.next_session, session_name, 0, None)
+        self._object_vector_weights: tuple[int, dict[str, np.ndarray]] = (-1, {})  # a copy, by epochs learnt
+        self._restore(stored)
+        self.relocalisation = StoredMapRelocalisation(config, stored.keyframes, self.experience_map, self.loop_detector)
+
+    def _restore(self, stored: MapState) -> None:
+        """Start from a stored map: experiences, objects, associations and the OVCN as stored (its keyframes wait
+        in the relocalisation, in the map's frame)."""
+        if not stored.experiences:
+            return
+        self.experience_map.restore(stored, self.session.id)
+        self.object_map.restore(stored.objects)
+        self.hebbian.restore(stored.hebbian, self.grid_cells.dims, self.head_direction.cells)
+        if stored.object_vector_weights:
+            self.object_vector_cells.restore(stored.object_vector_weights, stored.object_vector_losses)
 
     def step(self, frame: Frame) -> np.ndarray:
         """Process one frame (the paper's steps in order); returns the current pose estimate T_world_robot."""
@@ -148,19 +162,28 @@ class NeoSLAM:
     def _find_loops(self, frame_index: int, keyframe: Keyframe, odometry: np.ndarray) -> list[LoopClosure]:
         """The keyframe's closures: with a stored map's parts not joined yet (searched whole; the first joins this
         session to the map), then within the map this session is in (a query keyframe closes one loop)."""
-        relocalised = self.stored_map.relocalise(self, frame_index, keyframe, odometry)
-        queries = {closure.query_keyframe for closure in relocalised}
+        relocalisation = self.relocalisation.relocalise(keyframe, odometry, self.keyframes.odometer_m)
+        if relocalisation.joined is not None:
+            self._take_stored_cell_state(relocalisation.joined)
+            if self.session.relocalised_frame is None:
+                self.session = replace(self.session, relocalised_frame=frame_index)
+        queries = {closure.query_keyframe for closure in relocalisation.closures}
         found = self.loop_detector.query(keyframe, self.keyframes.odometer_m)
-        return relocalised + [closure for closure in found if closure.query_keyframe not in queries]
+        return relocalisation.closures + [closure for closure in found if closure.query_keyframe not in queries]
+
+    def _take_stored_cell_state(self, closure: LoopClosure) -> None:
+        """Relocalised in a stored map: the cells take the stored place's state, moved to where the closure puts
+        the robot (the limit of a strong local-view injection; two sessions' cells start apart)."""
+        stored = self.experience_map.experiences[self.experience_map.experience_of(closure.match_keyframe)]
+        heading = stored.head_direction * self.head_direction.cell_angle
+        shift, turn = offset_in_cells(heading, stored.pose, closure.relative_pose, self.grid_cells, self.head_direction)
+        self.grid_cells.reset((stored.grid_cell + shift) % np.asarray(self.grid_cells.dims))
+        self.head_direction.reset((stored.head_direction + turn) % self.head_direction.cells)
+        self._grid_centre = self.grid_cells.centre  # the unwrapped decoded position goes on, not by the jump
 
     @property
     def frames_processed(self) -> int:
         return self._recorded
-
-    def recentre_grid_decoding(self) -> None:
-        """The cells were set to a new state (relocalised in a stored map): the unwrapped decoded position goes on
-        from where it was, not by the jump."""
-        self._grid_centre = self.grid_cells.centre
 
     def _cell_state(self) -> CellState:
         return CellState(self.grid_cells.centre, self.head_direction.centre)
@@ -292,9 +315,35 @@ class NeoSLAM:
         """The keyframes this session stored (the loop detector also holds those of a stored map it joined)."""
         return [k for k in self.loop_detector.index.keyframes if k.id >= self.keyframes.first_id]
 
+    def session_record(self) -> SessionRecord:
+        return replace(self.session, frames=self.frames_processed)
+
     def map_state(self) -> MapState:
-        """What a map file stores: the stored map this run started from and what this session added to it."""
-        return self.stored_map.state(self)
+        """What a map file stores: the stored map this run started from and what this session added to it (the
+        arrays are the live ones, not copies)."""
+        session_of = self.experience_map.session_of
+        closures = [StoredClosure(self.session.id, session_of(c.match_keyframe), c) for c in self.loop_closures]
+        return MapState(
+            sessions=[*self.stored.sessions, self.session_record()],
+            keyframes=[*self.stored.keyframes, *self.own_keyframes()],
+            keyframe_experience=self.experience_map.keyframe_experiences,
+            experiences=self.experience_map.experiences,
+            experience_poses=self.experience_map.graph.poses,
+            links=self.experience_map.graph.links,
+            closures=[*self.stored.closures, *closures],
+            objects=self.object_map.state(),
+            hebbian=self.hebbian.traces(),
+            object_vector_weights=self._learnt_object_vector_weights(),
+            object_vector_losses=self.object_vector_cells.loss_history,
+        )
+
+    def _learnt_object_vector_weights(self) -> dict[str, np.ndarray]:
+        """The OVCN's weights, copied again only once it has learnt another epoch (a map is committed at every
+        keyframe, the OVCN learns a few epochs in all)."""
+        epochs = len(self.object_vector_cells.loss_history)
+        if self._object_vector_weights[0] != epochs:
+            self._object_vector_weights = (epochs, self.object_vector_cells.weights())
+        return self._object_vector_weights[1]
 
     def _scores(self, keyframe: Keyframe) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The ids of the keyframes the loop detector holds and a keyframe's matching scores against each."""
@@ -326,7 +375,7 @@ class NeoSLAM:
             hebbian=self.hebbian,
             frame_times_s=frame_times_s,
             keyframe_frames=np.asarray(self.keyframes.frames, dtype=int),
-            session=self.stored_map.record(self),
+            session=self.session_record(),
             first_keyframe=self.keyframes.first_id,
             moving_objects=self.moving_objects.objects(estimate.poses),
             moving_observations=self.moving_objects.flagged,

@@ -18,7 +18,7 @@ from neoslam.mapping.graph import MapGraph
 from neoslam.mapping.landmarks import LandmarkSolver, landmark_key
 from neoslam.pipeline import NeoSLAM
 from neoslam.sim.routes import ROUTES, drive_route
-from neoslam.sim.sessions import session_recordings
+from neoslam.sim.session_drives import session_recordings
 from neoslam.sim.simulator import simulate_route
 from neoslam.types import Link, ObjectMapState
 

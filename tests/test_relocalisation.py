@@ -15,7 +15,7 @@ from neoslam.datasets.simulated import read_dataset, write_dataset
 from neoslam.geometry import invert_pose
 from neoslam.pipeline import NeoSLAM, RunResult
 from neoslam.sim.routes import ROUTES, drive_route
-from neoslam.sim.sessions import SessionRecording, session_recordings
+from neoslam.sim.session_drives import SessionRecording, session_recordings
 from neoslam.types import MapState
 
 TRUE_PLACE_M = 5.0  # a closure is true when its two frames are this close in the ground truth

@@ -14,7 +14,7 @@ from neoslam.datasets.simulated import read_dataset, write_dataset
 from neoslam.geometry import body_velocities, make_pose
 from neoslam.sim.detections import DetectionSimulator
 from neoslam.sim.routes import ROUTES, drive_route
-from neoslam.sim.sessions import session_recordings
+from neoslam.sim.session_drives import session_recordings
 from neoslam.sim.simulator import simulate, world_for
 from neoslam.types import Trajectory
 

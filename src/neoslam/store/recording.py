@@ -15,7 +15,7 @@ from neoslam.io.atomic import check_target_file
 from neoslam.store.map_file import MapFile
 from neoslam.types import Frame, MapState
 
-__all__ = ["MapRecorder", "MapSession", "check_map_path", "map_session"]
+__all__ = ["MapRecorder", "MapRecording", "check_map_path", "map_recording"]
 
 
 def check_map_path(path: Path, out: Path, inputs: Iterable[Path | None], localise_only: bool) -> None:
@@ -54,7 +54,7 @@ class MapRecorder:
 
 
 @dataclass
-class MapSession:
+class MapRecording:
     """The map a run starts from (empty for a new file) and the observer that writes it."""
 
     path: Path
@@ -64,12 +64,12 @@ class MapSession:
 
 
 @contextmanager
-def map_session(path: Path, config: NeoSLAMConfig, localise_only: bool) -> Iterator[MapSession]:
+def map_recording(path: Path, config: NeoSLAMConfig, localise_only: bool) -> Iterator[MapRecording]:
     """Open a map file (checked; read-only with `localise_only`) or create it, for one run."""
     exists = path.exists()
     map_file = MapFile.open(path, config, read_only=localise_only) if exists else MapFile.create(path, config)
     try:
         stored = map_file.load()
-        yield MapSession(path, stored, MapRecorder(None if localise_only else map_file), localise_only)
+        yield MapRecording(path, stored, MapRecorder(None if localise_only else map_file), localise_only)
     finally:
         map_file.close()
