@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from neoslam.cells import ObjectVectorCells
+from neoslam.commands.run import run_dataset
 from neoslam.config import NeoSLAMConfig, SimulatorConfig
 from neoslam.datasets.simulated import read_dataset, write_dataset
 from neoslam.geometry import make_pose, robot_points_to_camera
-from neoslam.jobs import run_dataset
 from neoslam.pipeline import object_vectors, run
 from neoslam.sim.simulator import simulate_route
 from neoslam.types import ObjectObservation

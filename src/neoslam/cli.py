@@ -1,4 +1,4 @@
-"""The `neoslam` command: it parses arguments and calls `neoslam.jobs`, nothing more."""
+"""The `neoslam` command: it parses arguments and calls `neoslam.commands`, nothing more."""
 
 from __future__ import annotations
 
@@ -134,9 +134,9 @@ def simulate(
     quiet: QuietOption = False,
 ) -> None:
     """Turn a trajectory into what a stereo camera with a detector and visual odometry would record there."""
+    from neoslam.commands.simulate import record, simulate_dataset
     from neoslam.config.profiles import simulation_config
     from neoslam.io.atomic import check_target
-    from neoslam.jobs import record, simulate_dataset
 
     try:
         if trajectory is not None and route is not None:
@@ -199,7 +199,8 @@ def run_command(
 ) -> None:
     """Run NeoSLAM on a simulated dataset, a KITTI image sequence or a ROS 1 / ROS 2 bag and write the results
     folder (trajectories, object map, pose graph, metrics, plots); with --map, as a session of a kept map."""
-    from neoslam.jobs import ImageInputs, run_dataset, with_backend
+    from neoslam.commands.run import run_dataset, with_backend
+    from neoslam.datasets.opening import ImageInputs
 
     try:
         settings = with_backend(load_config(config), backend)
@@ -249,7 +250,8 @@ def detect(
 ) -> None:
     """Run the configured detector over a sequence's left images and write the detections in the JSON-lines
     format that `neoslam run --detections` reads."""
-    from neoslam.jobs import ImageInputs, detect_sequence
+    from neoslam.commands.detect import detect_sequence
+    from neoslam.datasets.opening import ImageInputs
 
     try:
         settings = load_config(config)
@@ -274,7 +276,7 @@ def evaluate(
     config: ConfigOption = None,
 ) -> None:
     """ATE, RPE and KITTI drift of a trajectory file against ground truth; loop precision and recall."""
-    from neoslam.jobs import evaluate_files
+    from neoslam.commands.evaluate import evaluate_files
 
     try:
         settings = load_config(config)

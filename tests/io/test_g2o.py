@@ -9,11 +9,11 @@ import gtsam
 import numpy as np
 import pytest
 
+from neoslam.commands.run import with_backend
 from neoslam.config import NeoSLAMConfig
 from neoslam.config.profiles import simulation_config
 from neoslam.datasets.simulated import read_dataset, write_dataset
 from neoslam.io.g2o import link_information, write_g2o
-from neoslam.jobs import with_backend
 from neoslam.mapping.experience_map import ExperienceMap
 from neoslam.mapping.pose_graph import link_sigmas
 from neoslam.pipeline import run

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
+from neoslam.commands.run import with_backend
 from neoslam.config import NeoSLAMConfig, load_config
 from neoslam.config.profiles import simulation_config
-from neoslam.jobs import with_backend
 from neoslam.sweep import expand, parse_spec
 from neoslam.sweep.cells import axes_that_vary
 from neoslam.sweep.driver import _tasks

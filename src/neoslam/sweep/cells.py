@@ -271,7 +271,7 @@ def _config_hash(config: NeoSLAMConfig, sections: frozenset[str] = frozenset()) 
 def expand(
     spec: Spec,
     environ: Mapping[str, str] | None = None,
-    measure: str = "neoslam.jobs.run_dataset",
+    measure: str = "neoslam.commands.run.run_dataset",
 ) -> Plan:
     """Check everything a cell needs (files, profiles, overrides) and list the cells in the spec's order.
     `measure` names the measurement (part of every cell's id); `environ` the NEOSLAM_* variables (default: the

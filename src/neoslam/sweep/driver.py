@@ -49,7 +49,7 @@ __all__ = ["CellRecord", "SweepResult", "run_sweep", "measure_name", "FORMAT", "
 
 FORMAT, VERSION = "neoslam-sweep", 1
 MARKER = "sweep.json"
-DEFAULT_MEASURE = "neoslam.jobs.run_dataset"
+DEFAULT_MEASURE = "neoslam.commands.run.run_dataset"
 
 
 @dataclass(frozen=True)

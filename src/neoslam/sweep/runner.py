@@ -88,7 +88,7 @@ def one_line(error: BaseException, replacements: dict[str, str] | None = None) -
 
 def run_pipeline(dataset: Path, config, out: Path, inputs) -> dict[str, Any]:
     """The default measurement: `neoslam run` on the dataset (results folder at `out`), its metrics."""
-    from neoslam.jobs import run_dataset
+    from neoslam.commands.run import run_dataset
 
     return run_dataset(dataset, out, config, progress=False, inputs=inputs)
 
@@ -115,7 +115,7 @@ def _first_lines(data: bytes, count: int) -> bytes:
 
 def _simulate(source: Source, config, folder: Path, names: dict[str, str]) -> Path:
     """The source's simulated dataset, written to folder/dataset."""
-    from neoslam.jobs import record, simulate_dataset
+    from neoslam.commands.simulate import record, simulate_dataset
 
     if source.kind == "route":
         if source.frames is None:
@@ -172,7 +172,7 @@ def run_task(task: Task) -> list[Outcome]:
             f"this worker runs neoslam {code_version()}, the sweep {task.code_version}: install the same version"
         )
         return [_failed(cell, problem, {}, where) for cell in task.cells]
-    from neoslam.jobs import ImageInputs
+    from neoslam.datasets.opening import ImageInputs
 
     measure = task.measure or run_pipeline
     source = task.source

@@ -9,13 +9,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from neoslam.commands.evaluate import evaluate_files
+from neoslam.commands.run import run_dataset
+from neoslam.commands.simulate import DEFAULT_ROUTE, record, simulate_dataset
 from neoslam.config import NOISE_PROFILES, NeoSLAMConfig
 from neoslam.config.calibration import DETECTION_PROFILES
 from neoslam.config.profiles import simulation_config
+from neoslam.datasets.opening import ImageInputs
 from neoslam.errors import ConfigError, InputError, OutputError
 from neoslam.geometry import transform_points
 from neoslam.io.trajectory_files import read_tum, write_tum
-from neoslam.jobs import DEFAULT_ROUTE, ImageInputs, evaluate_files, record, run_dataset, simulate_dataset
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.types import Trajectory
 
@@ -34,7 +37,7 @@ def _route_file(folder: Path, frames: int = FRAMES) -> Path:
 
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("jobs")
+    folder = tmp_path_factory.mktemp("commands")
     settings = simulation_config(CONFIG, "vo", 2)
     simulate_dataset(folder / "dataset", record(settings, trajectory=_route_file(folder)))
     return folder / "dataset"
@@ -236,7 +239,7 @@ def test_default_scenario_end_to_end(tmp_path: Path) -> None:
 
 
 def test_with_backend() -> None:
-    from neoslam.jobs import with_backend
+    from neoslam.commands.run import with_backend
 
     assert with_backend(CONFIG, None) == CONFIG
     for backend in ("relaxation", "pose-graph"):

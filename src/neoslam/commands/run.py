@@ -1,0 +1,120 @@
+"""`neoslam run`: NeoSLAM over a dataset folder, a KITTI sequence or a ROS bag (or the default simulated scenario),
+optionally from and into a map file and shown live, written as a results folder."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from contextlib import nullcontext
+from pathlib import Path
+from typing import Any
+
+from neoslam.commands.run_metrics import run_metrics, session_metrics
+from neoslam.commands.simulate import DEFAULT_ROUTE, record
+from neoslam.config import NeoSLAMConfig
+from neoslam.datasets.opening import ImageInputs, open_dataset
+from neoslam.datasets.simulated import write_dataset
+from neoslam.errors import ConfigError
+from neoslam.io.atomic import atomic_directory
+from neoslam.io.g2o import write_g2o
+from neoslam.io.results import (
+    write_config,
+    write_experience_map,
+    write_loop_closures,
+    write_metrics,
+    write_object_vector_cells,
+    write_objects,
+    write_trajectories,
+)
+from neoslam.pipeline import run
+from neoslam.store.recording import check_map_path, map_recording
+from neoslam.viz.rerun_view import check_rerun_target, recording_target, rerun_session
+from neoslam.viz.run_plots import write_plots
+
+__all__ = ["run_dataset", "with_backend"]
+
+
+def with_backend(config: NeoSLAMConfig, backend: str | None) -> NeoSLAMConfig:
+    """The config with another map-correction back end, if one is named."""
+    if backend is None:
+        return config
+    if backend not in ("relaxation", "pose-graph"):
+        raise ConfigError(f"unknown backend {backend!r}; choose relaxation or pose-graph")
+    return config.model_copy(update={"experience_map": config.experience_map.model_copy(update={"backend": backend})})
+
+
+def _observers(*observers):
+    """One step observer calling each given one in turn (None ones left out)."""
+    chosen = [observer for observer in observers if observer is not None]
+    if not chosen:
+        return None
+
+    def observe(slam, frame, pose) -> None:
+        for observer in chosen:
+            observer(slam, frame, pose)
+
+    return observe
+
+
+def run_dataset(
+    data: Path | None,
+    out: Path,
+    config: NeoSLAMConfig,
+    overwrite: bool = False,
+    progress: bool = True,
+    inputs: ImageInputs = ImageInputs(),
+    read: Sequence[Path | None] = (),
+    rerun: str | None = None,
+    map_path: Path | None = None,
+    localise_only: bool = False,
+) -> dict[str, Any]:
+    """Run NeoSLAM on a dataset folder, KITTI sequence or ROS bag (or simulate the default scenario first) and
+    write the results folder. `read` names further files the run reads (a config file), which the output must not
+    replace. `rerun`: "spawn" shows the run live in the Rerun viewer, a path ending .rrd records it there.
+    `map_path`: a map file the run starts from and extends (created if missing; see neoslam.store), written as the
+    run goes; with `localise_only` the run uses it and changes nothing in it."""
+    check_rerun_target(rerun)
+    read_paths = [data, *inputs.files(), *read]
+    if map_path is not None:
+        check_map_path(map_path, out, read_paths, localise_only)
+    elif localise_only:
+        raise ConfigError("--localise-only needs --map FILE")
+    with atomic_directory(out, overwrite, read_paths) as staging:
+        if data is None:
+            write_dataset(staging / "dataset", record(config, route=DEFAULT_ROUTE, progress=progress))
+            data = staging / "dataset"
+        dataset = open_dataset(data, config, inputs)
+        viewer = recording_target(rerun, out, staging)
+        kept = map_recording(map_path, config, localise_only) if map_path is not None else nullcontext(None)
+        with kept as session, rerun_session(viewer, dataset, overwrite, [data, *inputs.files(), *read]) as on_step:
+            stored = session.stored if session is not None else None
+            recorder = session.recorder if session is not None else None
+            start = time.perf_counter()
+            result = run(
+                dataset.frames(),
+                config,
+                total=len(dataset),
+                progress=progress,
+                on_step=_observers(on_step, recorder),
+                stored=stored,
+                session_name=dataset.name,
+            )
+            wall_s = time.perf_counter() - start
+            if recorder is not None:
+                recorder.finish()
+        trajectories = {"trajectory": result.estimate, "odometry": result.odometry}
+        if dataset.ground_truth is not None:
+            trajectories["groundtruth"] = dataset.ground_truth
+        write_trajectories(staging, trajectories)
+        write_loop_closures(staging / "loop_closures.csv", result.loop_closures, result.closure_sessions())
+        write_objects(staging / "objects.csv", result.objects, result.moving_objects)
+        write_object_vector_cells(staging, result.object_vector_cells)
+        write_experience_map(staging / "experience_map.json", result.experience_map)
+        write_g2o(staging / "experience_map.g2o", result.experience_map)
+        write_config(staging / "config.yaml", config)
+        metrics = run_metrics(dataset, result, config, wall_s)
+        if session is not None:
+            metrics["session"] = session_metrics(session, result)
+        write_metrics(staging / "metrics.json", metrics)
+        write_plots(staging / "plots", result, dataset.ground_truth, config.matching.score_threshold)
+    return metrics
