@@ -40,7 +40,7 @@ class MotionLimitsConfig(Section):
         gt=0,
         le=100,
         description="largest rotation rate between two frames (about any axis), rad/s: about half a turn a second, "
-        "well above a road vehicle's turns and what the paper-max odometry noise produces",
+        "well above a road vehicle's turns and practically never reached by the paper-max odometry noise",
     )
     max_time_step: float = Field(
         10.0,
