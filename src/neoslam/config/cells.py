@@ -38,8 +38,8 @@ class GridCellConfig(Section):
         8.0,
         ge=0.01,
         le=1000,
-        description="horizontal metres of motion per cell: the paper's 7-bin check of loop candidates then admits "
-        "56 m of odometry drift (2 m per cell rejected most true closures of KITTI 00 and 02, see kitti_sim.py)",
+        description="horizontal metres of motion per cell (8: the paper's 7-bin check of loop candidates then "
+        "admits 56 m of odometry drift)",
     )
     metres_per_cell_vertical: float = Field(1.0, ge=0.01, le=1000, description="vertical metres of motion per cell")
     shift_kernel: Literal["zero-skew", "linear"] = Field(
@@ -104,13 +104,15 @@ class ObjectVectorConfig(Section):
         "cos_sin", description="φ as (cos φ, sin φ), continuous across ±π (fits better), or raw radians / π"
     )
     hidden_units: int = Field(32, gt=0, le=4096, description="N hidden ELU units (eq. 12)")
-    optimizer: Literal["adam", "sgd"] = Field("adam", description="plain SGD at lr 0.001 hardly learns in 10 epochs")
-    learning_rate: float = Field(0.001, gt=0, le=10, description="paper: 0.001")
+    optimizer: Literal["adam", "sgd"] = Field(
+        "adam", description="weight optimiser: adam, or plain SGD (which hardly learns in 10 epochs at lr 0.001)"
+    )
+    learning_rate: float = Field(0.001, gt=0, le=10, description="optimiser learning rate (paper: 0.001)")
     batch_size: int = Field(
         1, gt=0, le=100_000, description="object vectors per update; 1: one per observation, as eq. 13"
     )
-    epochs: int = Field(10, gt=0, le=1000, description="paper: 10")
-    keyframes_per_epoch: int = Field(20, gt=0, le=100_000, description="paper: 20")
+    epochs: int = Field(10, gt=0, le=1000, description="training epochs (paper: 10)")
+    keyframes_per_epoch: int = Field(20, gt=0, le=100_000, description="keyframes per training epoch (paper: 20)")
     seed: int = Field(0, ge=0, le=2**63 - 1, description="weight initialisation and shuffling seed")
 
 
@@ -123,15 +125,11 @@ class HebbianConfig(Section):
         20.0,
         ge=0,
         description="a recall injects this many times the cells' injection_energy (NeuroSLAM's energy per frame of "
-        "a re-seen view; a closure is a place verified over consecutive keyframes): 2.0 of a packet of 1 by "
-        "default, so a recall re-anchors the cells (at 0.1 it moved them 9 % of a 1-cell offset, none of 5 cells)",
+        "a re-seen view): 2.0 against a packet of 1 by default, enough for a verified closure to re-anchor the cells",
     )
     recall_on: Literal["detected", "accepted"] = Field(
         "accepted",
-        description="which closures recall their place: only those the experience map's closure gate accepted (the "
-        "paper's order; the default: with closure_gate drift it meets the heavy-drift targets, and a "
-        "false closure the detector accepts cannot re-anchor the cells and so open the gate for the next one: on the "
-        "town trap, 5 false closures with detected, none with accepted, benchmarks/gating.py), or every one the "
-        "detector accepts (NeuroSLAM's local-view calibration: the gate then compares re-anchored cells; with the "
-        "paper's grid-cell check this is what keeps true closures after heavy drift)",
+        description="which closures recall their place in the cells: accepted, only those the experience map's "
+        "closure gate accepted (the paper's order: a false closure cannot re-anchor the cells and so open the gate "
+        "for the next); detected, every one the loop detector accepts (NeuroSLAM's local-view calibration)",
     )

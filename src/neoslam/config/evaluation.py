@@ -18,8 +18,8 @@ class EvaluationConfig(Section):
     loop_min_frame_gap: int = Field(100, ge=0, le=10_000_000, description="and at least this many frames apart")
     loop_distance: Literal["3d", "horizontal"] = Field(
         "horizontal",
-        description="distance of that test: horizontal, since KITTI 02 and 08 ground truth disagree by up to 5.8 m "
-        "in height where a road is driven again; or 3d",
+        description="distance of that test: horizontal (KITTI's ground-truth heights disagree by metres where a "
+        "road is driven again), or 3d",
     )
     alignment: Literal["se3", "sim3", "none"] = Field("se3", description="alignment before ATE")
     rpe_delta: float = Field(100.0, gt=0, le=1e6, description="RPE pair spacing")

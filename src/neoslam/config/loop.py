@@ -26,9 +26,8 @@ class KeyframeConfig(Section):
         5,
         gt=0,
         le=1000,
-        description="where fewer objects stand within neighbourhood_radius (a sparse street: real KITTI streets "
-        "through a real detector), the neighbourhood grows until it holds this many (5: measured against 6, 8 and "
-        "no growth on the real revisit and on simulated drives, benchmarks/loops.py --config)",
+        description="where fewer objects stand within neighbourhood_radius (a sparse street), the neighbourhood "
+        "grows until it holds this many (5: chosen over 6, 8 and no growth with benchmarks/loops.py)",
     )
     sparse_neighbourhood_radius: float = Field(
         60.0, gt=0, le=1000, description="the largest the neighbourhood grows to on a sparse street, m"
@@ -50,8 +49,8 @@ class KeyframeConfig(Section):
         gt=0,
         le=1,
         description="stereo depth std at 1 m, m; grows with depth^2, weights the fusion and gives the keyframe "
-        "objects' covariances (0.27 px of disparity at KITTI's focal length x baseline, 380 px m: the real front "
-        "end's 0.23 px, benchmarks/calibrate_sim.py, with room for its heavier tails)",
+        "objects' covariances (0.27 px of disparity at KITTI's focal length x baseline, 380 px m: a margin over the "
+        "real front end's fitted disparity noise)",
     )
     bearing_sigma: float = Field(
         0.002,
@@ -152,8 +151,7 @@ class MatchingConfig(Section):
         gt=0,
         le=1000,
         description="with tolerances fixed: a match fits the rigid transform within this, m; others are left out of "
-        "the fit and its RMS (about 3 σ of a right match seen from the other direction, where a truck's or a "
-        "cross-street object's centre is off by a metre)",
+        "the fit and its RMS (about 3 σ of a right match seen from the other side)",
     )
     max_contradictions: int = Field(
         4,
@@ -161,16 +159,14 @@ class MatchingConfig(Section):
         le=10_000,
         description="reject if under the fit more objects than this stand well inside the other keyframe's ground "
         "with no object of their label near them there: a place driven again shows the same objects, a street that "
-        "only shares part of its layout shows others (closures accepted without this check, benchmarks/loops.py, "
-        "vo, seeds 1-10: 87 % of the true ones have none and 98.7 % at most 2; the false ones 2 to 7)",
+        "only shares part of its layout shows others",
     )
     contradiction_radius: float = Field(
         2.5,
         gt=0,
         le=1000,
         description="an object with one of its label this close under the fit is not contradicted, m "
-        "(keyframes.association_radius: observations this close are one object; a right match seen from the other "
-        "side or a truck's centre can be off by more than the inlier distance)",
+        "(keyframes.association_radius: observations this close are one object)",
     )
     contradiction_margin: float = Field(
         3.0,
@@ -183,25 +179,23 @@ class MatchingConfig(Section):
         3.5,
         gt=0,
         le=1000,
-        description="accept only if the fit puts the two robot poses this close, m: the same place is within 5 m "
-        "(evaluation.loop_max_distance), less the error of the fit's offset, up to 0.6 m with vo odometry and "
-        "1.5 m with heavy (simulated KITTI drives)",
+        description="accept only if the fit puts the two robot poses this close, m: the same place is within "
+        "evaluation.loop_max_distance (5 m), less the error of the fit's offset",
     )
     max_vertical_offset: float = Field(
         6.0,
         gt=0,
         le=1000,
-        description="reject if the fit puts the two robot poses this far apart in height, m: a bridge "
-        "over a street is another place (KITTI 02 and 08 ground truth disagree by up to 5.8 m at one place)",
+        description="reject if the fit puts the two robot poses this far apart in height, m: a bridge over a street "
+        "is another place (6: just above KITTI ground truth's largest height disagreement at a revisited place)",
     )
     max_yaw_drift_deg: float = Field(
         30.0,
         gt=0,
         le=360,
         description="reject a fit that turns the query's world by more than this, degrees, plus yaw_drift_per_100m: "
-        "its rotation is the odometry's heading drift between the two passes; a layout that is nearly point-"
-        "symmetric can also fit turned by 180° (true closures accepted without this check, benchmarks/loops.py: "
-        "at most 1.3°/100 m with vo odometry, 6.8°/100 m with heavy)",
+        "its rotation is the odometry's heading drift between the two passes, and a nearly point-symmetric layout "
+        "can also fit turned by 180°",
     )
     yaw_drift_per_100m: float = Field(
         3.0,
@@ -242,9 +236,8 @@ class MatchingConfig(Section):
         gt=0,
         le=1e5,
         description="with tolerances covariance: how far the odometry may have drifted from a stored keyframe, m, "
-        "taken as three standard deviations by the evidence's drift prior (a fit that moves the robot by d costs "
-        "4.5 (d / R)² / ln 2 bits); the search radius only bounds which keyframes are candidates, so that opening "
-        "it to the whole map does not make a distant look-alike as likely as a near place",
+        "taken as three stds by the evidence's drift prior (a fit that moves the robot by d costs 4.5 (d / R)² / ln 2 "
+        "bits), so a distant look-alike is less likely than a near place; search_radius only bounds the candidates",
     )
     drift_radius_per_metre: float = Field(
         0.1, ge=0, le=10, description="plus this share of the distance travelled since the stored keyframe"
@@ -262,7 +255,7 @@ class MatchingConfig(Section):
         ge=0,
         le=10_000,
         description="with retrieval triangles: a retrieved place is matched only if one of its keyframes shares "
-        "this many triangle keys with the query (of true relocalisations on simulated drives, 0.1 % share none)",
+        "this many triangle keys with the query",
     )
     triangle_side_bin: float = Field(
         1.0, gt=0, le=100, description="retrieval triangles: sides are rounded to bins this wide, m"
@@ -281,8 +274,7 @@ class MatchingConfig(Section):
         gt=0,
         le=10_000,
         description="at most this many products of the power iteration (spectral matching): keyframes of one place "
-        "converge in about 16 (99 % within 35 on the simulated KITTI drives); those that need more have no "
-        "dominant consistent group, the case that verification rejects",
+        "converge well within it; those that need more have no dominant consistent group, which verification rejects",
     )
     power_tolerance: float = Field(
         1e-5,

@@ -21,18 +21,15 @@ class ExperienceMapConfig(Section):
         "drift",
         description="which closures the map accepts: grid-cells, the paper's check (the recognised experience's "
         "cells within gc_distance_threshold of the current); drift, that check widened by gc_drift_cells_per_100m "
-        "for the metres the odometry has run since the robot last knew where it was (since the stored experience "
-        "was made or the last accepted closure, whichever is fewer): the cells drift with the odometry, and under "
-        "heavy drift the paper's check rejects true closures after a long loop (the default, with "
-        "hebbian.recall_on accepted); none, every closure the detector accepted (benchmarks/gating.py compares them)",
+        "for the travel since the stored experience was made or the last accepted closure, whichever is less (the "
+        "cells drift with the odometry); none, every closure the loop detector accepted",
     )
     gc_drift_cells_per_100m: float = Field(
         2.0,
         ge=0,
         le=1000,
         description="closure_gate drift: cells added to gc_distance_threshold per 100 m travelled since, cells "
-        "(2: 16 m horizontally and 2 m vertically per 100 m; true closures on simulated KITTI drives with heavy "
-        "odometry were up to 1.2 cells per 100 m apart, benchmarks/gating.py)",
+        "(2: 16 m horizontally and 2 m vertically per 100 m, above the drift of true closures under heavy odometry)",
     )
     similarity_threshold: float = Field(3.0, gt=0, le=1000, description="S_max of eq. 17, cells")
     mu_gc: float = Field(1.0, ge=0, le=1000, description="μ_gc of eq. 17")
@@ -61,22 +58,20 @@ class ExperienceMapConfig(Section):
     object_landmarks: bool = Field(
         False,
         description="pose graph: the object map's confirmed objects become landmarks (a Point3 each, a bearing-range "
-        "factor per (object, experience) observation sum) and the graph is solved incrementally by iSAM2 as "
-        "experiences and observations arrive (neoslam.mapping.landmarks); a view of a landmark made more than "
-        "localised_distance ago counts only while the robot knows where it is (associations by a drifted pose are "
-        "guesses). False: today's pose graph, solved at loops",
+        "factor per (object, experience) observation sum), solved incrementally by iSAM2 (neoslam.mapping.landmarks); "
+        "a view of a landmark first seen over localised_distance of travel ago counts only while the robot knows where "
+        "it is. False: the pose graph without landmarks, solved at loops",
     )
     landmark_noise: Literal["per-view", "summed"] = Field(
         "per-view",
-        description="object landmarks: the noise of an (object, experience) observation sum; per-view, that of one of "
-        "its views (the depth std of the inverse-variance mean view along the ray, object_map.position_sigma_floor "
-        "across it): views from one experience share the visible surface and the odometry since the experience "
-        "began, so their errors do not average out; summed, the inverse of the summed weight (independent views)",
+        description="object landmarks: the noise of an (object, experience) observation sum: per-view, that of one "
+        "of its views (views from one experience share the visible surface and the odometry, so their errors do not "
+        "average out); summed, the inverse of the summed weight (independent views)",
     )
     landmark_robust_kernel: Literal["huber", "cauchy", "none"] = Field(
         "cauchy",
-        description="object landmarks: kernel of the observation factors (a wrong association must not "
-        "bend the map: Cauchy's weight falls with the square of the residual, Huber's only linearly)",
+        description="object landmarks: kernel of the observation factors (Cauchy: a wrong association's weight "
+        "falls with the square of its residual, Huber's only linearly)",
     )
     landmark_robust_threshold: float = Field(
         3.0, gt=0, le=1000, description="object landmarks: kernel scale, in standard deviations"
@@ -86,20 +81,15 @@ class ExperienceMapConfig(Section):
         ge=0,
         le=100,
         description="object landmarks: std of an observation's centre along its ray in the ground plane, beyond the "
-        "stereo depth std, in radii of the class's footprint (keyframes.footprints) along the ray: the centre was "
-        "shifted a radius from the visible surface to the object's middle, and where the object's orientation and "
-        "extent are unknown (or the detector's centres are biased otherwise) the shift may be wrong by a radius for "
-        "every view alike, a bias no noise averages out: a straight drive whose centres are already the middles "
-        "ends 2.3 m (1.5 %) long at 1 radius, 1.1 m at 2, 0.4 m at 4, while simulated KITTI keeps less of the "
-        "landmarks' gain the larger it is (benchmarks/landmarks.py); 0: the shift is taken as exact",
+        "stereo depth std, in radii of the class's footprint along the ray (keyframes.footprints): the shift from the "
+        "visible surface to the middle may be wrong by a radius for every view alike; 0: the shift is taken as exact",
     )
     landmark_height_sigma: float = Field(
         2.0,
         gt=0,
         le=10,
         description="object landmarks: std of an observation's centre in height, m (at least "
-        "object_map.position_sigma_floor): object heights from stereo boxes are poor, and a landmark must not pull "
-        "the map up or down",
+        "object_map.position_sigma_floor): heights from stereo boxes are poor and must not pull the map up or down",
     )
     reuse_places: bool = Field(
         True,
@@ -113,8 +103,7 @@ class ExperienceMapConfig(Section):
         gt=0,
         le=1000,
         description="re-enter an experience this close to the corrected pose, m (keyframes.spacing: the stored "
-        "keyframe nearest to a new one on a street driven again is within a spacing; at 3 m, passes of KITTI 00 "
-        "still stored keyframes 3-4 m from a stored one)",
+        "keyframe nearest to a new one on a street driven again is within a spacing)",
     )
     reuse_max_turn_deg: float = Field(
         45.0,
@@ -128,9 +117,8 @@ class ExperienceMapConfig(Section):
         gt=0,
         le=1000,
         description="a closure re-enters the stored keyframe's experience only if it puts the robot within this of "
-        "where the map has it (ground plane), m (3 loop_sigma); otherwise the map is off (the robot comes back after "
-        "a long loop) and the keyframe is stored with a new experience and a loop link that corrects it, as the "
-        "paper does",
+        "where the map has it (ground plane), m (3 loop_sigma); otherwise the keyframe is stored with a new "
+        "experience and a loop link that corrects the map, as the paper does",
     )
     reentry_yaw_deg: float = Field(
         3.0, gt=0, le=180, description="and turned within this of where the map has it, degrees (3 loop_yaw_sigma)"
@@ -180,9 +168,8 @@ class ObjectMapConfig(Section):
         gt=0,
         le=1000,
         description="an observation joins an object within this in height, m (at least association_radius; "
-        "matching.max_vertical_offset): the association radius holds in the ground plane, where objects stand apart; "
-        "the pose's height and pitch drift move a view 50 m away up or down by 2 m and more, while objects rarely "
-        "stand above each other (a bridge)",
+        "matching.max_vertical_offset): height and pitch drift move far views up or down by metres, while objects "
+        "rarely stand above each other",
     )
     tentative_distance: float = Field(
         60.0,
@@ -203,8 +190,7 @@ class MovingObjectsConfig(Section):
     enabled: bool = Field(
         True,
         description="detect moving objects; their observations join no keyframe and no map object, and objects.csv "
-        "lists them with moving = 1 (on static simulated streets loop precision, recall and ATE as without it; "
-        "with traffic it is what keeps loop closure working: benchmarks/moving.py)",
+        "lists them with moving = 1 (with traffic it is what keeps loop closure working)",
     )
     gate_radius: float = Field(
         2.5,
@@ -239,41 +225,31 @@ class MovingObjectsConfig(Section):
         ge=0,
         le=100,
         description="a track not judged moving whose velocity is this many stds from zero (and at least min_speed) "
-        "is held out of keyframes and the map until it is judged (significance_sigmas or more: never held). "
-        "Measured on simulated KITTI 05 and 00 (benchmarks/moving.py): 2 keeps more traffic out and closes more "
-        "loops with traffic but cost static 05 loop recall (0.64 -> 0.51); 3 leaves static streets as they were",
+        "is held out of keyframes and the map until it is judged (significance_sigmas or more: never held; 3: "
+        "static streets lose no loop recall)",
     )
     min_speed: float = Field(
         2.0,
         ge=0,
         le=100,
-        description="and at least this fast, m/s: below, odometry's local error and the visible surface changing "
-        "with the view. Under heavy odometry noise (simulated `heavy`: 0.1 rad/s of yaw-rate noise) a parked car 30 m "
-        "off seems to move about 1 m/s; at 0.7 m/s the detector flagged parked objects there and no loop closed on "
-        "static KITTI 05 and 06 (45.5 and 41.9 m against 9.0 and 3.5 m at 2.0), before the tracks allowed for the "
-        "odometry's noise (odometry_heading_noise). Walkers (1.0-1.8 m/s) have their own (label_min_speed). With "
-        "`vo` odometry at 1.0 (benchmarks/moving.py, KITTI 05 / 00) parked objects flagged stayed at 0.015 / 0.011 "
-        "of their views and loop recall as at 2.0 (0.30 against 0.32 on 00 with traffic)",
+        description="and at least this fast, m/s: slower apparent motion is the odometry's local error and the "
+        "visible surface changing with the view (a parked car 30 m off seems to move about 1 m/s under heavy "
+        "odometry noise); walkers have label_min_speed",
     )
     label_min_speed: dict[str, Annotated[float, Field(ge=0, le=100)]] = Field(
         {"person": 0.7},
-        description="min_speed for these labels instead, m/s: a walker (1.0-1.8 m/s) stays below 2.0, is then known to "
-        "be static, and a keyframe holding them does not match the place again (simulated KITTI 02, vo, 20 % moving, "
-        "benchmarks/kitti_sim.py: a revisit lost, 18.6 m ATE with the motion detector against 9.5 m with person: 0.7)",
+        description="min_speed for these labels instead, m/s: a walker (1.0-1.8 m/s) stays below the general "
+        "min_speed, is taken as static, and a keyframe holding one does not match the place again",
     )
     judge_after: int = Field(
         3, ge=2, le=1000, description="a track is judged from this many observations on (two fix no velocity)"
     )
     unjudged: Literal["join", "wait", "out"] = Field(
         "wait",
-        description="the views of a track not found moving: join (keyframes take them as static); wait: a keyframe "
+        description="the views of a track not found moving: join, keyframes take them as static; wait, a keyframe "
         "window object is provisional until one of its views belongs to a track known to be static (static_sigmas), "
-        "and a provisional object missing where a keyframe match puts it is no contradiction (it is matched and "
-        "counts in the share of objects to match as any other); out: a track's first judge_after - 1 views are "
-        "kept out of keyframes and the map. Measured by benchmarks/moving.py (KITTI 05 / 00, vo, 20 % moving): "
-        "loop recall 0.26 / 0.18 with join, 0.41 / 0.36 with wait (static streets 0.60 / 0.60 -> 0.66 / 0.64): a "
-        "car's track that broke off before it was judged, or a car coming on whose first views show neither, left "
-        "a window object that stopped its keyframes matching the place again",
+        "and a provisional object missing where a match puts it is no contradiction (matched, it counts as any "
+        "other); out, a track's first judge_after - 1 views are kept out of keyframes and the map",
     )
     static_sigmas: float = Field(
         2.0,
@@ -289,8 +265,7 @@ class MovingObjectsConfig(Section):
         le=10,
         description="the odometry's heading error as a random walk, rad per square root of a second: a track's "
         "earlier views are turned about the robot by their range times it (the default is the simulated `vo` "
-        "profile's 0.01 rad/s yaw-rate noise per 0.1 s frame; `heavy`: 0.032). Without it a parked car 30 m off "
-        "seems to move under heavy odometry noise",
+        "profile's 0.01 rad/s yaw-rate noise per 0.1 s frame; `heavy`: 0.032)",
     )
     odometry_distance_noise: float = Field(
         0.063,
@@ -316,11 +291,8 @@ class MovingObjectsConfig(Section):
         2.0,
         gt=0,
         le=1000,
-        description="tracks whose fitted speed is below this feed the estimate, m/s: traffic is faster; a parked car "
-        "30 m off seems to move about 1 m/s under the simulated `heavy` odometry (leaving out every track found "
-        "moving instead left out those, and the estimate of 0.032 rad heading noise came out at 0.014-0.021). At 4.0 "
-        "slow cars raised it (simulated KITTI 05 / 06 `heavy`, all three kitti_sim.py steps, static and 20 % moving: "
-        "5.50 / 2.69 / 5.71 / 8.42 m against 6.38 / 1.84 / 5.23 / 3.28 m at 2.0)",
+        description="tracks whose fitted speed is below this feed the estimate, m/s: parked objects that seem to "
+        "move under heavy odometry noise stay in, while traffic is faster",
     )
     noise_window: int = Field(1000, ge=1, le=1_000_000, description="views kept for the estimate (the latest)")
     noise_min_views: int = Field(
@@ -328,9 +300,7 @@ class MovingObjectsConfig(Section):
         ge=1,
         le=1_000_000,
         description="views held before the estimate is used (the floors alone until then): parked cars flagged in "
-        "those first frames stay so, and a drive that loops back to its start misses them (simulated KITTI 06, "
-        "`heavy`: 7 closures at 100, 16 at 30, 18 at 20 and 10, 22 with `heavy`'s noise stated; `vo` with traffic: "
-        "the same at 20 as at 100)",
+        "those first frames stay flagged, and a drive that loops back to its start misses them",
     )
     noise_bins: int = Field(
         4,

@@ -74,8 +74,8 @@ class DetectorConfig(Section):
         ],
         min_length=1,
         description="windows the network looks at: by default the whole frame at half size (near objects) and the "
-        "band of rows that holds KITTI's road and parked cars enlarged 1.5x (distant ones). At the 416 px YOLOX-Nano "
-        "was exported for, a KITTI frame shrinks threefold and most parked cars are lost (benchmarks/perception.py)",
+        "band of rows that holds KITTI's road and parked cars enlarged 1.5x (distant ones, which a whole frame "
+        "shrunk to YOLOX-Nano's 416 px input loses)",
     )
     score_threshold: float = Field(
         0.45, ge=0, le=1, description="score (objectness x class) to keep a box (chosen on the labelled frames)"
@@ -162,8 +162,8 @@ class StereoObjectConfig(Section):
         60.0,
         gt=0,
         le=1e4,
-        description="objects farther than this are dropped, m (the keyframe fusion weighs far, noisy views little; "
-        "on a real street many parked cars are placed only at 40-60 m, before hedges and other cars hide them)",
+        description="objects farther than this are dropped, m (the keyframe fusion weighs far, noisy views little, "
+        "and on real streets many parked cars are seen only at 40-60 m)",
     )
     patch_size: int = Field(16, gt=1, le=256, description="side of the grey appearance patch, px (as the simulator's)")
 
@@ -180,7 +180,7 @@ class StereoOdometryConfig(Section):
         13,
         gt=2,
         le=101,
-        description="Lucas-Kanade window side, px (cost grows with its square; 21 is ~2x slower, no better)",
+        description="Lucas-Kanade window side, px (cost grows with its square)",
     )
     klt_levels: int = Field(3, ge=0, le=10, description="Lucas-Kanade pyramid levels of the frame-to-frame tracking")
     stereo_levels: int = Field(

@@ -23,11 +23,15 @@ class SimulatorConfig(Section):
     detection: DetectionNoiseConfig = DetectionNoiseConfig()
     detection_profile: str = Field(
         "real",
-        description="named detection model and street (neoslam.config.calibration: real, calibrated to the real "
-        "front end on KITTI 06; ideal, the simulator's own defaults, a richer street and detector): it fills "
-        "`detection` and `world`, and the fields given there override it",
+        description="named detection model and street (neoslam.config.calibration): real, calibrated to the real "
+        "front end on KITTI 06; ideal, a richer street and detector. It fills `detection` and `world`; fields given "
+        "there override it",
     )
-    noise_profile: str = Field("vo", description="name of the odometry noise profile (see NOISE_PROFILES)")
+    noise_profile: str = Field(
+        "vo",
+        description="name of the odometry noise profile that `odometry` holds: none, vo, heavy or paper-max "
+        "(`neoslam simulate --noise` sets both)",
+    )
     odometry: OdometryNoiseConfig = OdometryNoiseConfig()
     frame_period: float = Field(
         0.1037, ge=0.001, le=10, description="s between frames when no times are given (KITTI mean)"
