@@ -1,17 +1,21 @@
-"""The generated references of the documentation: the configuration (every section of `NeoSLAMConfig`) and the
-command line (every command of `neoslam.cli.app`), written from the code at build time so that they cannot drift.
+"""The generated references of the documentation: the configuration (every section of `NeoSLAMConfig`), the
+command line (every command of `neoslam.cli.app`) and the source tree (every module), written from the code at
+build time so that they cannot drift.
 
 MkDocs loads this file as a hook (`hooks:` in mkdocs.yml) and calls `on_page_markdown` for every page; a page asks
-for a reference with a marker line, `<!-- generated: configuration -->` or `<!-- generated: cli -->`. Nothing here
+for a reference with a marker line, `<!-- generated: configuration -->`, `<!-- generated: cli -->` or
+`<!-- generated: layout -->` (the source tree, a row per module). Nothing here
 imports MkDocs: the tests import this file and check the references without it."""
 
 from __future__ import annotations
 
+import ast
 import json
 import re
 import types
 import typing
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import annotated_types
@@ -208,7 +212,31 @@ def cli_reference() -> str:
     return "\n".join(lines)
 
 
-GENERATORS: dict[str, Callable[[], str]] = {"configuration": configuration_reference, "cli": cli_reference}
+SOURCE = Path(__file__).resolve().parents[2] / "src" / "neoslam"
+
+
+def _summary(path: Path) -> str:
+    """A module's first sentence (of its docstring's first paragraph)."""
+    docstring = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
+    paragraph = _one_line(docstring.split("\n\n")[0])
+    sentence = re.split(r"(?<=[a-z0-9)`])(?<!\beq)(?<!e\.g)(?<!i\.e)\. ", paragraph, maxsplit=1)[0]
+    return sentence.removesuffix(".")
+
+
+def layout_reference() -> str:
+    """The source tree: a row per module, with the first sentence of its docstring."""
+    rows = ["| module | what it holds |", "|---|---|"]
+    for path in sorted(SOURCE.rglob("*.py"), key=lambda p: (p.parent != SOURCE, p.parent.as_posix(), p.name)):
+        name = path.relative_to(SOURCE.parent).as_posix()
+        rows.append(f"| `{name}` | {_cell(_summary(path))} |")
+    return "\n".join(rows) + "\n"
+
+
+GENERATORS: dict[str, Callable[[], str]] = {
+    "configuration": configuration_reference,
+    "cli": cli_reference,
+    "layout": layout_reference,
+}
 
 
 def expand(markdown: str) -> str:

@@ -1,4 +1,6 @@
-"""Named detection profiles of the simulator: what the detector and stereo step report, and the street they see.
+"""The simulator's calibration constants: named detection profiles and odometry noise profiles.
+
+A detection profile is what the detector and stereo step report, and the street they see.
 
 `ideal` is the simulator's own default model: a rich street (parked objects every few metres on both sides) and a
 detector that finds most of them out to 40 m. `real` is calibrated to NeoSLAM's real front end (YOLOX-Nano plus ORB

@@ -1,1 +1,1 @@
-"""Files in and out: trajectory formats, frame conventions, results folder."""
+"""Files in and out: trajectory formats, tables, the results folder, outputs written whole, input checks."""

@@ -1,1 +1,1 @@
-"""Maps built from the frames: the object map now; the object experience map and its back ends later."""
+"""Maps built from the frames: the object experience map and its back ends, the object map, moving objects."""
