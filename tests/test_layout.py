@@ -17,14 +17,14 @@ PACKAGE = Path(__file__).resolve().parents[1] / "src" / "neoslam"
 MAX_MODULE_LINES = 500
 
 LAYERS: list[set[str]] = [
-    {"types", "geometry", "errors", "text", "boxes"},
+    {"types", "geometry", "errors", "text", "inputs", "stopping", "boxes"},
     {"config"},
     {"cells", "loop", "mapping"},
     {"relocalisation", "pipeline"},
     {"perception", "sim", "datasets", "store", "io", "evaluation", "viz"},
     {"commands"},
     {"sweep"},
-    {"cli"},
+    {"cli", "__main__"},
 ]
 
 

@@ -10,19 +10,14 @@ pose = slam.step(Frame(...))           # T_world_robot after this frame
 result = slam.result(frame_times_s)    # trajectories, object map, keyframes, loop closures, experience map
 ```
 
-The names are imported on first use, so that `import neoslam` (and the CLI's start) stays fast.
+The names (and `__version__`) are looked up on first use, so that `import neoslam` (and the CLI's start, whose
+signal handling comes first) stays fast.
 """
 
 from __future__ import annotations
 
 from importlib import import_module
-from importlib.metadata import PackageNotFoundError, version
 from typing import TYPE_CHECKING, Any
-
-try:
-    __version__ = version("neoslam")
-except PackageNotFoundError:  # running from a source tree that was not installed
-    __version__ = "0.0.0+unknown"
 
 if TYPE_CHECKING:
     from neoslam.config import NeoSLAMConfig, load_config
@@ -54,7 +49,18 @@ __all__ = [
 ]
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("neoslam")
+    except PackageNotFoundError:  # running from a source tree that was not installed
+        return "0.0.0+unknown"
+
+
 def __getattr__(name: str) -> Any:
+    if name == "__version__":
+        return _version()
     if name in _PUBLIC:
         return getattr(import_module(_PUBLIC[name]), name)
     raise AttributeError(f"module 'neoslam' has no attribute {name!r}")

@@ -2,18 +2,13 @@
 
 from __future__ import annotations
 
-import os
-import signal
-import sys
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 from typer.core import TyperGroup
 
-from neoslam import __version__
+from neoslam import __version__, stopping
 from neoslam.config import NOISE_PROFILES, dump_config, load_config
 from neoslam.errors import ConfigError, NeoSLAMError
 
@@ -59,42 +54,6 @@ def _fail(error: NeoSLAMError | OSError) -> None:
     message = f"{error.filename}: {error.strerror}" if isinstance(error, OSError) and error.filename else error
     typer.echo(f"neoslam: error: {message}", err=True)
     raise typer.Exit(code=2)
-
-
-class _Terminated(BaseException):
-    """Ctrl-C, SIGTERM or SIGHUP, raised where the command is so that the output it was writing is removed on the
-    way out (not a KeyboardInterrupt: click would turn that into "Aborted!" and exit code 1)."""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signum)
-        self.signum = signum
-
-
-@contextmanager
-def _stops_cleanly() -> Iterator[None]:
-    """Ctrl-C, SIGTERM and SIGHUP stop a command alike: the output it was writing vanishes, one line, exit 128+N."""
-
-    def terminate(signum: int, _frame: object) -> None:
-        raise _Terminated(signum)
-
-    previous = {s: signal.signal(s, terminate) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
-    try:
-        yield
-    except _Terminated as stop:
-        why = "interrupted" if stop.signum == signal.SIGINT else f"stopped by {signal.Signals(stop.signum).name}"
-        _exit_now(why, stop.signum)
-    finally:
-        for number, handler in previous.items():
-            signal.signal(number, handler)
-
-
-def _exit_now(why: str, signum: int) -> None:
-    """Exit at once once the output being written is gone: the interpreter's own shutdown (torch, onnxruntime,
-    OpenCV) takes over a second, and a user who stops a run wants the prompt back now."""
-    typer.echo(f"neoslam: {why}; no output written", err=True)
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(128 + signum)
 
 
 def _version(value: bool) -> None:
@@ -329,18 +288,17 @@ def sweep(
     into one table (sweep.csv, sweep.parquet) and a summary (summary.md). Rerun to resume."""
     from neoslam.sweep import load_spec, make_executor, run_sweep
 
+    def kept_cells() -> str | None:
+        if any((out / "cells").glob("*/metrics.json")):
+            return f"the finished cells are kept in {out}/cells: run the same command to resume"
+        return None
+
     try:
-        loaded = load_spec(spec)
-        result = run_sweep(loaded, out, make_executor(ray, workers), progress=not quiet, read=[spec])
+        with stopping.stop_note(kept_cells):
+            loaded = load_spec(spec)
+            result = run_sweep(loaded, out, make_executor(ray, workers), progress=not quiet, read=[spec])
     except (NeoSLAMError, OSError) as error:
         _fail(error)
-    except _Terminated as stop:
-        why = "interrupted" if stop.signum == signal.SIGINT else f"stopped by {signal.Signals(stop.signum).name}"
-        typer.echo(f"neoslam: {why}; the finished cells are kept in {out}/cells: run the same command to resume",
-                   err=True)  # fmt: skip
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(128 + stop.signum)
     typer.echo(result.summary)
     failed = len({r.cell.id for r in result.failed})
     typer.echo(
@@ -354,9 +312,9 @@ def sweep(
 
 
 def entry() -> None:
-    """The `neoslam` console script: the app, stopped cleanly by Ctrl-C, SIGTERM and SIGHUP at any point."""
-    with _stops_cleanly():
-        app()
+    """The app, stopped cleanly by Ctrl-C, SIGTERM and SIGHUP at any point (see neoslam.stopping)."""
+    stopping.install()
+    app()
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -13,23 +13,18 @@ from typing import Any
 import yaml
 
 from neoslam.errors import InputError
+from neoslam.inputs import MAX_CONFIG_BYTES, MAX_TEXT_BYTES, read_input_bytes
 
 __all__ = ["read_text", "read_yaml"]
 
 
-def read_text(path: Path, missing: str = "file not found") -> str:
-    """The file's text; InputError when it is missing (`missing` says so), a folder, unreadable or not UTF-8.
+def read_text(path: Path, missing: str = "file not found", limit: int = MAX_TEXT_BYTES) -> str:
+    """The file's text; InputError when it is missing (`missing` says so), not a regular file, over `limit`
+    bytes, unreadable or not UTF-8 (see neoslam.inputs).
 
     Line ends are kept as they are (csv needs "\\r\\n" inside quotes intact); `str.splitlines` handles all of them.
     """
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise InputError(path, missing) from None
-    except IsADirectoryError:
-        raise InputError(path, "is a folder, not a file") from None
-    except OSError as error:
-        raise InputError(path, f"cannot be read ({error.strerror})") from None
+    data = read_input_bytes(path, missing, limit)
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as error:
@@ -38,10 +33,10 @@ def read_text(path: Path, missing: str = "file not found") -> str:
         raise InputError(path, f"not a text file (not UTF-8: byte 0x{bad:02x})", line=line) from None
 
 
-def read_yaml(path: Path, missing: str = "file not found") -> Any:
+def read_yaml(path: Path, missing: str = "file not found", limit: int = MAX_CONFIG_BYTES) -> Any:
     """The file's YAML document (safe types only), read by `read_text`; InputError naming the line where YAML knows
     it, and for nesting too deep for the parser."""
-    text = read_text(path, missing)
+    text = read_text(path, missing, limit)
     try:
         return yaml.safe_load(text)
     except yaml.YAMLError as error:

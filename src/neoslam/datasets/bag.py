@@ -34,6 +34,7 @@ from neoslam.datasets.bag_messages import (
 )
 from neoslam.datasets.bag_topics import BagTopics, choose_topics
 from neoslam.errors import InputError, NeoSLAMError
+from neoslam.inputs import check_input_file, check_input_folder_files
 from neoslam.types import Trajectory
 
 __all__ = ["BagSequence", "BagTopics", "is_bag", "open_bag", "pair_by_stamp"]
@@ -150,8 +151,10 @@ def open_bag(
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
 
-    if not path.exists():
-        raise InputError(path, "bag not found")
+    if path.is_dir():
+        check_input_folder_files(path)
+    else:
+        check_input_file(path, "bag not found")  # a bag is as long as its recording: no bound on its size
     with _reading(path):
         # A ROS 2 bag without message definitions (older sqlite3 bags) is read with the standard types.
         reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))

@@ -25,6 +25,7 @@ from pydantic import ValidationError
 
 from neoslam.config import CameraConfig, describe_validation_error
 from neoslam.errors import InputError
+from neoslam.inputs import MAX_IMAGE_BYTES, read_input_bytes
 from neoslam.io.trajectory_files import read_kitti, read_times
 from neoslam.text import read_text
 from neoslam.types import Trajectory
@@ -120,9 +121,7 @@ def _native_stderr_silenced() -> Iterator[None]:
 
 def read_grey_image(path: Path) -> np.ndarray:
     """An 8-bit grey image; one clear error when it is missing, truncated or not an image."""
-    if not path.is_file():
-        raise InputError(path, "image not found")
-    data = path.read_bytes()
+    data = read_input_bytes(path, "image not found", MAX_IMAGE_BYTES)
     if data.startswith(PNG_SIGNATURE) and PNG_END not in data:
         raise InputError(path, "truncated PNG (its closing IEND chunk is missing)")
     with _native_stderr_silenced():

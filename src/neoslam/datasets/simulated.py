@@ -25,6 +25,7 @@ from pydantic import ValidationError
 from neoslam.config import CameraConfig, MotionLimitsConfig, describe_validation_error
 from neoslam.errors import InputError
 from neoslam.geometry import integrate_body_velocities
+from neoslam.inputs import check_input_file
 from neoslam.io.detection_checks import box_problem, centre_problem, label_problem, score_problem
 from neoslam.io.motion_limits import check_time_steps, check_velocities
 from neoslam.io.tables import numeric_column, read_table, write_table
@@ -239,8 +240,7 @@ def _npy_header(path: Path) -> tuple[tuple[int, ...], np.dtype, int]:
 
 
 def _read_patches(path: Path, count: int) -> np.ndarray:
-    if not path.is_file():
-        raise InputError(path, "file not found")
+    check_input_file(path)
     shape, dtype, present = _npy_header(path)
     if len(shape) != 3 or dtype != np.uint8 or shape[0] != count or not 0 < shape[1] == shape[2]:
         raise InputError(path, f"expected ({count}, s, s) uint8 patches with s >= 1, found {shape} {dtype}")

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from neoslam.errors import InputError
+from neoslam.text import read_text
 
 __all__ = [
     "LabelledObject",
@@ -94,7 +95,7 @@ def _labelled_object(path: Path, key: str, item: Any) -> LabelledObject:
 def read_labels(path: Path) -> tuple[list[FrameLabels], float]:
     """The labelled frames in frame order, and the least box height that counts (px)."""
     try:
-        document = json.loads(Path(path).read_text(encoding="utf-8-sig"))
+        document = json.loads(read_text(Path(path)))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, RecursionError) as error:
         raise InputError(path, f"cannot read the labels ({error})") from error
     if not isinstance(document, dict) or not isinstance(document.get("frames"), dict):

@@ -19,13 +19,12 @@ from collections.abc import Iterable, Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
 
+from neoslam import stopping
 from neoslam.errors import OutputError
 
 __all__ = ["check_target", "check_target_file", "atomic_directory", "atomic_file"]
 
 _PARTIAL = ".partial-"
-# Signals a user stops a run with: one arriving while a folder is published or cleaned up waits until that is done.
-_STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 @contextmanager
@@ -37,7 +36,8 @@ def _signals_deferred() -> Iterator[None]:
         yield
         return
     arrived: list[int] = []
-    held = [number for number in _STOP_SIGNALS if signal.getsignal(number) is not None]  # None: set outside Python
+    # None: a handler set outside Python, which cannot be restored
+    held = [number for number in stopping.STOP_SIGNALS if signal.getsignal(number) is not None]
     previous = {number: signal.signal(number, lambda number, _: arrived.append(number)) for number in held}
     try:
         yield
@@ -101,12 +101,12 @@ def check_target_file(target: Path, overwrite: bool = False, inputs: Iterable[Pa
         raise OutputError(f"{target}: file exists (pass --overwrite to replace it)")
 
 
-def _make_parents(folder: Path) -> list[Path]:
-    """Create the missing ancestors of an output, outermost first; returns those it created."""
+def _make_parents(folder: Path, created: list[Path]) -> None:
+    """Create the missing ancestors of an output, outermost first, each added to `created` as it is made."""
     missing = [p for p in (folder, *folder.parents) if not p.exists()][::-1]
     for path in missing:
         path.mkdir()
-    return missing
+        created.append(path)
 
 
 def _remove_created(created: list[Path]) -> None:
@@ -184,19 +184,25 @@ def atomic_directory(target: Path, overwrite: bool = False, inputs: Iterable[Pat
     (with any parent folder this call created). See `check_target` for the targets refused."""
     inputs = list(inputs)
     check_target(target, overwrite, inputs)
-    created = _make_parents(target.parent)
+    created: list[Path] = []
     staging = _staging_path(target)
-    try:
-        _refuse_concurrent_writer(target)
+
+    def remove_staging() -> None:
         shutil.rmtree(staging, ignore_errors=True)
-        staging.mkdir()
-        yield staging
-        with _signals_deferred():
-            _publish_folder(staging, target, overwrite)
+        _remove_created(created)
+
+    try:
+        with stopping.on_stop(remove_staging):
+            _make_parents(target.parent, created)
+            _refuse_concurrent_writer(target)
+            shutil.rmtree(staging, ignore_errors=True)
+            staging.mkdir()
+            yield staging
+            with _signals_deferred():  # a stop during the rename waits for it; the output is then whole
+                _publish_folder(staging, target, overwrite)
     except BaseException:
         with _signals_deferred():
-            shutil.rmtree(staging, ignore_errors=True)
-            _remove_created(created)
+            remove_staging()
         raise
 
 
@@ -206,15 +212,21 @@ def atomic_file(target: Path, overwrite: bool = False, inputs: Iterable[Path | N
     parent folder this call created). See `check_target_file` for the targets refused."""
     inputs = list(inputs)
     check_target_file(target, overwrite, inputs)
-    created = _make_parents(target.parent)
+    created: list[Path] = []
     staging = _staging_path(target)
+
+    def remove_staging() -> None:
+        staging.unlink(missing_ok=True)
+        _remove_created(created)
+
     try:
-        _refuse_concurrent_writer(target)
-        yield staging
-        with _signals_deferred():
-            _publish_file(staging, target, overwrite)
+        with stopping.on_stop(remove_staging):
+            _make_parents(target.parent, created)
+            _refuse_concurrent_writer(target)
+            yield staging
+            with _signals_deferred():  # a stop during the rename waits for it; the output is then whole
+                _publish_file(staging, target, overwrite)
     except BaseException:
         with _signals_deferred():
-            staging.unlink(missing_ok=True)
-            _remove_created(created)
+            remove_staging()
         raise

@@ -15,7 +15,7 @@ from typing import Protocol
 import cv2
 import numpy as np
 
-from neoslam.errors import InputError
+from neoslam.text import read_text
 
 __all__ = [
     "COCO_CLASSES",
@@ -195,8 +195,5 @@ def load_class_names(model_path: Path, labels_file: Path | None, file_name: str)
     path = labels_file if labels_file is not None else model_path.parent / file_name
     if labels_file is None and not path.is_file():
         return COCO_CLASSES
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise InputError(path, f"cannot read the class names ({error})") from error
+    text = read_text(path, "class names file not found")
     return tuple(line.strip() for line in text.splitlines() if line.strip())

@@ -14,6 +14,7 @@ import onnx
 import onnxruntime as ort
 
 from neoslam.errors import InputError
+from neoslam.inputs import MAX_MODEL_BYTES, check_input_file
 
 __all__ = ["free_input_size", "open_session"]
 
@@ -43,8 +44,7 @@ def open_session(
 ) -> ort.InferenceSession:
     """An onnxruntime CPU session of the model at `path` with a free input size; one line naming the file when
     the model is missing or cannot be loaded."""
-    if not path.is_file():
-        raise InputError(path, f"detector model not found: {help_text}")
+    check_input_file(path, f"detector model not found: {help_text}", MAX_MODEL_BYTES)
     try:
         model = free_input_size(onnx.load(str(path)))
     except Exception as error:  # protobuf's decode errors derive from Exception only

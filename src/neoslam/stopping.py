@@ -1,0 +1,99 @@
+"""How the `neoslam` command stops on Ctrl-C, SIGTERM or SIGHUP, at any moment from its first line.
+
+The handler never raises into the running code: an exception raised in the middle of an extension module's import
+(torch, GTSAM, onnxruntime take seconds to load) turns into an ImportError or an abort instead of a clean stop.
+It runs the clean-ups of the outputs being written at that moment (a staging folder removed, the parents a run
+created), stops the worker processes the command started, prints one line and exits with 128 + the signal's number
+(130 for Ctrl-C, 143 for SIGTERM) at once, without the interpreter's shutdown.
+
+Only the console script installs the handler (`install`); as a library, NeoSLAM leaves the signals alone and an
+interrupted call unwinds with KeyboardInterrupt as usual, its outputs removed on the way. Standard library only:
+this module is imported before anything heavy.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager, suppress
+from itertools import count
+
+__all__ = ["STOP_SIGNALS", "install", "installed", "on_stop", "stop_note"]
+
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+DEFAULT_NOTE = "no output written"
+
+_cleanups: dict[int, Callable[[], None]] = {}
+_notes: dict[int, Callable[[], str | None]] = {}
+_ids = count()
+_installed = False
+
+
+def installed() -> bool:
+    """Whether the console script's handler is in place (False when NeoSLAM is used as a library)."""
+    return _installed
+
+
+def install() -> None:
+    """Stop on SIGINT, SIGTERM and SIGHUP from now on: clean up, one line, exit 128 + N."""
+    global _installed
+    for number in STOP_SIGNALS:
+        signal.signal(number, _stop)
+    _installed = True
+
+
+@contextmanager
+def on_stop(cleanup: Callable[[], None]) -> Iterator[None]:
+    """Run `cleanup` if the command is stopped while the body runs (latest first, with the others registered)."""
+    key = next(_ids)
+    _cleanups[key] = cleanup
+    try:
+        yield
+    finally:
+        _cleanups.pop(key, None)
+
+
+@contextmanager
+def stop_note(note: Callable[[], str | None]) -> Iterator[None]:
+    """While the body runs, a stop prints `note()` after the reason instead of "no output written" (None: keep it):
+    what a stopped command leaves, such as a sweep's finished cells."""
+    key = next(_ids)
+    _notes[key] = note
+    try:
+        yield
+    finally:
+        _notes.pop(key, None)
+
+
+def _stop(signum: int, _frame: object) -> None:
+    for number in STOP_SIGNALS:  # a second Ctrl-C must not cut the clean-up short
+        signal.signal(number, signal.SIG_IGN)
+    for key in sorted(_cleanups, reverse=True):
+        with suppress(Exception):
+            _cleanups[key]()
+    _stop_children()
+    note = DEFAULT_NOTE
+    for key in sorted(_notes, reverse=True):
+        with suppress(Exception):
+            given = _notes[key]()
+            if given:
+                note = given
+                break
+    why = "interrupted" if signum == signal.SIGINT else f"stopped by {signal.Signals(signum).name}"
+    with suppress(OSError):
+        sys.stdout.flush()
+    with suppress(OSError):
+        os.write(2, f"neoslam: {why}; {note}\n".encode(errors="backslashreplace"))
+    os._exit(128 + signum)
+
+
+def _stop_children() -> None:
+    """The worker processes this command started (a sweep's pool) end with it, not after their current task."""
+    multiprocessing = sys.modules.get("multiprocessing")
+    if multiprocessing is None:
+        return
+    with suppress(Exception):
+        for child in multiprocessing.active_children():
+            child.kill()
