@@ -188,8 +188,8 @@ def run_command(
     if "session" in metrics:
         session = metrics["session"]
         relocalised = session["relocalised_frame"]
-        where = "map's frame" if session["frame"] == "map" else "its own frame (not relocalised)"
-        rows += [("map session", f"{session['id']} of {session['map']}, in the {where}")]
+        where = "the map's frame" if session["frame"] == "map" else "its own frame (not relocalised)"
+        rows += [("map session", f"{session['id']} of {session['map']}, in {where}")]
         if session["id"] > 1:
             rows += [("relocalised at frame", "never" if relocalised is None else relocalised)]
             rows += [("closures with the stored map", session["map_closures"])]
@@ -233,6 +233,7 @@ def evaluate(
     loops: Annotated[Path | None, typer.Option(help="loop_closures.csv to judge against the ground truth.")] = None,
     json_out: Annotated[Path | None, typer.Option("--json", help="Also write the metrics as JSON.")] = None,
     config: ConfigOption = None,
+    overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an existing --json file.")] = False,
 ) -> None:
     """ATE, RPE and KITTI drift of a trajectory file against ground truth; loop precision and recall."""
     from neoslam.commands.evaluate import evaluate_files
@@ -244,7 +245,9 @@ def evaluate(
                 raise ConfigError(f"--align must be se3, sim3 or none, not {align!r}")
             evaluation = settings.evaluation.model_copy(update={"alignment": align})
             settings = settings.model_copy(update={"evaluation": evaluation})
-        metrics = evaluate_files(estimate, groundtruth, settings, est_format, gt_format, loops, json_out, [config])
+        metrics = evaluate_files(
+            estimate, groundtruth, settings, est_format, gt_format, loops, json_out, [config], overwrite
+        )
     except (NeoSLAMError, OSError) as error:
         _fail(error)
     rows = [(key, value) for key, value in metrics.items() if not isinstance(value, dict)]

@@ -7,6 +7,7 @@ not text is refused by all of them with the line of its first bad byte.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any
 
@@ -15,7 +16,26 @@ import yaml
 from neoslam.errors import InputError
 from neoslam.inputs import MAX_CONFIG_BYTES, MAX_TEXT_BYTES, read_input_bytes
 
-__all__ = ["read_text", "read_yaml"]
+__all__ = ["YamlLoader", "load_yaml", "read_text", "read_yaml"]
+
+
+class YamlLoader(yaml.SafeLoader):
+    """PyYAML's safe loader with YAML 1.2's booleans: only true and false. YAML 1.1 also reads on, off, yes and no
+    as booleans, so `synchronous: off` would become False instead of the setting's value "off"."""
+
+
+YamlLoader.yaml_implicit_resolvers = {
+    first: [(tag, regexp) for tag, regexp in resolvers if tag != "tag:yaml.org,2002:bool"]
+    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+YamlLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:bool", re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"), list("tTfF")
+)
+
+
+def load_yaml(text: str) -> Any:
+    """A YAML document of safe types, booleans as YAML 1.2 reads them (see YamlLoader)."""
+    return yaml.load(text, Loader=YamlLoader)  # noqa: S506 - a SafeLoader subclass
 
 
 def read_text(path: Path, missing: str = "file not found", limit: int = MAX_TEXT_BYTES) -> str:
@@ -38,7 +58,7 @@ def read_yaml(path: Path, missing: str = "file not found", limit: int = MAX_CONF
     it, and for nesting too deep for the parser."""
     text = read_text(path, missing, limit)
     try:
-        return yaml.safe_load(text)
+        return load_yaml(text)
     except yaml.YAMLError as error:
         mark = getattr(error, "problem_mark", None)
         line = mark.line + 1 if mark is not None else None

@@ -23,15 +23,17 @@ def test_write_then_read(tmp_path: Path) -> None:
     path = tmp_path / "out.csv"
     write_table(path, COLUMNS, [[0, "car", "1.5000"], [1, "a, b", "-2"]])
     assert path.read_bytes() == b'frame,label,x\n0,car,1.5000\n1,"a, b",-2\n'
-    rows = read_table(path, COLUMNS)
-    assert rows == [["0", "car", "1.5000"], ["1", "a, b", "-2"]]
-    np.testing.assert_array_equal(numeric_column(path, rows, COLUMNS, "x"), [1.5, -2.0])
+    table = read_table(path, COLUMNS)
+    assert table.rows == [["0", "car", "1.5000"], ["1", "a, b", "-2"]]
+    assert table.lines.tolist() == [2, 3]
+    np.testing.assert_array_equal(numeric_column(path, table, COLUMNS, "x"), [1.5, -2.0])
 
 
 def test_header_only_gives_no_rows(tmp_path: Path) -> None:
     path = _write(tmp_path, "frame,label,x\n")
-    assert read_table(path, COLUMNS) == []
-    assert numeric_column(path, [], COLUMNS, "x").shape == (0,)
+    table = read_table(path, COLUMNS)
+    assert table.rows == []
+    assert numeric_column(path, table, COLUMNS, "x").shape == (0,)
 
 
 def test_missing_file(tmp_path: Path) -> None:
@@ -53,6 +55,15 @@ def test_header_mismatch(tmp_path: Path) -> None:
         read_table(path, COLUMNS)
     assert (caught.value.path, caught.value.line) == (path, 1)
     assert f"{path}:1:" in str(caught.value)
+
+
+def test_blank_lines_count_in_the_line_named(tmp_path: Path) -> None:
+    path = _write(tmp_path, "\nframe,label,x\n\n0,car,1\n\n\n1,car,oops\n")
+    table = read_table(path, COLUMNS)
+    assert table.lines.tolist() == [4, 7]
+    with pytest.raises(InputError, match="not a number") as caught:
+        numeric_column(path, table, COLUMNS, "x")
+    assert caught.value.line == 7
 
 
 def test_wrong_column_count(tmp_path: Path) -> None:

@@ -69,8 +69,8 @@ def test_depth_error_grows_with_depth_in_the_written_files(block_folder: Path) -
     frames = numeric_column(block_folder / "detections.csv", rows, DETECTION_COLUMNS, "frame").astype(int)
     measured_z = numeric_column(block_folder / "detections.csv", rows, DETECTION_COLUMNS, "z")
     links = read_table(block_folder / "truth" / "detections.csv", ("detection", "object_id"))
-    assert [int(row[0]) for row in links] == list(range(len(rows)))
-    object_ids = np.array([int(row[1]) for row in links])
+    assert [int(row[0]) for row in links.rows] == list(range(len(rows)))
+    object_ids = np.array([int(row[1]) for row in links.rows])
     objects_path = block_folder / "truth" / "objects.csv"
     object_rows = read_table(objects_path, OBJECT_COLUMNS)
     centres = np.column_stack([numeric_column(objects_path, object_rows, OBJECT_COLUMNS, c) for c in "xyz"])

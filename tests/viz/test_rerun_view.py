@@ -5,6 +5,7 @@ installed `--rerun` says how to install it; a bare `--rerun` spawns the viewer."
 from __future__ import annotations
 
 import json
+import os
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -129,10 +130,27 @@ def test_an_image_sequence_logs_its_left_images(rerun_module, shared_data: Path,
 def test_a_bare_rerun_spawns_the_viewer(rerun_module, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     spawned = []
     monkeypatch.setattr(rerun_module.RecordingStream, "spawn", lambda self, **kwargs: spawned.append(kwargs))
+    viewer = tmp_path / "bin" / "rerun"  # a stand-in for the viewer executable, found on PATH
+    viewer.parent.mkdir()
+    viewer.write_text("#!/bin/sh\n")
+    viewer.chmod(0o755)
+    monkeypatch.setenv("PATH", f"{viewer.parent}{os.pathsep}{os.environ.get('PATH', '')}")
     data = _simulate(tmp_path, 30)
     _ok("run", data, "--out", tmp_path / "out", "--rerun", "-q")
     _ok("run", data, "--rerun", "--out", tmp_path / "out2", "-q")  # DATA before it is not taken as the file
     assert len(spawned) == 2
+
+
+def test_without_the_viewer_executable_a_bare_rerun_says_how_to_get_it(
+    rerun_module, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("PATH", str(tmp_path / "empty"))
+    data = _simulate(tmp_path, 30)
+    result = _invoke("run", data, "--rerun", "--out", tmp_path / "out", "-q")
+    assert result.exit_code == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Rerun viewer (`rerun`) is not on PATH" in lines[0] and "--rerun FILE.rrd" in lines[0]
+    assert not (tmp_path / "out").exists()
 
 
 def test_a_recording_must_end_in_rrd(rerun_module, tmp_path: Path) -> None:

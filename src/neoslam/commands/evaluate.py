@@ -29,12 +29,13 @@ def evaluate_files(
     loops_path: Path | None = None,
     json_out: Path | None = None,
     read: Sequence[Path | None] = (),
+    overwrite: bool = False,
 ) -> dict[str, Any]:
     """Metrics of an estimate file against a ground-truth file (timestamps associated first), also written to
-    `json_out` if named (never over one of the files read)."""
+    `json_out` if named (never over one of the files read; over an existing file only with `overwrite`)."""
     inputs = [estimate_path, truth_path, loops_path, *read]
     if json_out is not None:
-        check_target_file(json_out, overwrite=True, inputs=inputs)
+        check_target_file(json_out, overwrite, inputs)
     estimate = read_trajectory(estimate_path, estimate_format)
     truth = read_trajectory(truth_path, truth_format)
     try:
@@ -53,6 +54,6 @@ def evaluate_files(
         closures = read_loop_closures(loops_path, frames=len(truth))
         metrics["loops"] = loop_metrics(closures, truth, config.evaluation)
     if json_out is not None:
-        with atomic_file(json_out, overwrite=True, inputs=inputs) as staging:
+        with atomic_file(json_out, overwrite, inputs) as staging:
             write_metrics(staging, metrics)
     return metrics

@@ -12,7 +12,7 @@ from pydantic import ValidationError
 
 from neoslam.config.system import NeoSLAMConfig
 from neoslam.errors import ConfigError, InputError
-from neoslam.text import read_yaml
+from neoslam.text import load_yaml, read_yaml
 
 __all__ = ["ENV_PREFIX", "config_values", "describe_validation_error", "dump_config", "load_config", "merge_settings"]
 
@@ -40,7 +40,7 @@ def _parse_scalar(raw: str) -> Any:
     """A YAML scalar or list ("0.3", "true", "[36, 36, 36]"); text that is not YAML stays a string, so that
     validation names the field instead of the YAML parser failing."""
     try:
-        return yaml.safe_load(raw) if raw.strip() else raw
+        return load_yaml(raw) if raw.strip() else raw
     except yaml.YAMLError:
         return raw
 

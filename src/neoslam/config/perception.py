@@ -166,6 +166,13 @@ class StereoObjectConfig(Section):
         "and on real streets many parked cars are seen only at 40-60 m)",
     )
     patch_size: int = Field(16, gt=1, le=256, description="side of the grey appearance patch, px (as the simulator's)")
+    max_boxes: int = Field(
+        100,
+        gt=0,
+        le=100_000,
+        description="most boxes of one frame placed in 3-D, the highest scores first (a detector's non-maximum "
+        "suppression keeps a few dozen; a detections file may hold any number, and each box costs a few ms)",
+    )
 
 
 class StereoOdometryConfig(Section):

@@ -226,6 +226,8 @@ def _index_stereo_pairs(
             stamps[topic].append(stamp or log_ns)  # an unstamped header: the time the bag received it
             refs[topic].append(_MessageRef(log_ns, rank, index))
     left, right = (np.array(stamps[t], dtype=np.int64) for t in (topics.left, topics.right))
+    for topic, topic_stamps in ((topics.left, left), (topics.right, right)):
+        _refuse_repeated_stamps(path, topic, topic_stamps)
     tolerance = round(config.pair_tolerance_s * NS_PER_S)
     pairs_left, pairs_right = pair_by_stamp(left, right, tolerance)
     _check_pairs(path, topics, config, left, right, pairs_left, pairs_right)
@@ -238,6 +240,15 @@ def _index_stereo_pairs(
         topics.left: [refs[topics.left][i] for i in pairs_left],
         topics.right: [refs[topics.right][j] for j in pairs_right],
     }
+
+
+def _refuse_repeated_stamps(path: Path, topic: str, stamps: np.ndarray) -> None:
+    """Two images of one camera with one stamp: which of them pairs is a guess, so the bag is refused."""
+    order = np.argsort(stamps, kind="stable")
+    repeated = np.flatnonzero(np.diff(stamps[order]) == 0)
+    if len(repeated):
+        first, second = sorted(int(order[k]) for k in (repeated[0], repeated[0] + 1))
+        raise InputError(path, f"messages {first} and {second} of {topic} have the same stamp ({stamps[first]} ns)")
 
 
 def _check_pairs(

@@ -154,7 +154,11 @@ def odometry_pose(message: Any) -> np.ndarray:
     quaternion = np.array(
         [pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w], dtype=np.float64
     )
+    if not np.isfinite(translation).all():
+        raise MessageError(f"odometry position is not finite ({', '.join(f'{v:g}' for v in translation)})")
+    if not np.isfinite(quaternion).all():
+        raise MessageError(f"odometry orientation is not finite ({', '.join(f'{v:g}' for v in quaternion)})")
     norm = float(np.linalg.norm(quaternion))
-    if not (np.isfinite(translation).all() and np.isfinite(norm)) or abs(norm - 1.0) > UNIT_QUATERNION_TOLERANCE:
-        raise MessageError(f"odometry pose is not finite or its quaternion is not unit (norm {norm:.4f})")
+    if abs(norm - 1.0) > UNIT_QUATERNION_TOLERANCE:
+        raise MessageError(f"odometry orientation is not a unit quaternion (norm {norm:.4f})")
     return pose_from_quaternion(translation, quaternion)[0]  # scipy normalises the quaternion

@@ -95,7 +95,7 @@ def open_dataset(data: Path, config: NeoSLAMConfig, inputs: ImageInputs) -> Data
     if is_simulated_dataset(data):
         if inputs != ImageInputs():
             raise ConfigError("--sequence, --detections and --odometry apply to KITTI image sequences only")
-        return read_dataset(data, config.motion_limits)
+        return read_dataset(data, config.motion_limits, config.perception.detector.classes)
     if is_kitti_root(data):
         sequence = kitti_sequence(data, inputs.sequence)
         return open_front_end(sequence, config.perception, inputs.detections, inputs.odometry, config.motion_limits)

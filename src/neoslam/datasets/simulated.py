@@ -15,6 +15,7 @@ DATASET/
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -169,23 +170,23 @@ def _read_frames(path: Path, limits: MotionLimitsConfig) -> tuple[np.ndarray, np
     values = {name: numeric_column(path, rows, FRAME_COLUMNS, name) for name in FRAME_COLUMNS}
     if not np.array_equal(values["frame"], np.arange(len(rows))):
         bad = int(np.flatnonzero(values["frame"] != np.arange(len(rows)))[0])
-        raise InputError(path, f"frame {values['frame'][bad]:g} out of order, expected {bad}", line=bad + 2)
+        problem = f"frame {values['frame'][bad]:g} out of order, expected {bad}"
+        raise InputError(path, problem, line=int(rows.lines[bad]))
     stamps = values["timestamp"]
     back = np.flatnonzero(np.diff(stamps) <= 0)
     if len(back):
-        raise InputError(path, f"timestamp {stamps[back[0] + 1]} does not increase", line=int(back[0]) + 3)
+        raise InputError(path, f"timestamp {stamps[back[0] + 1]} does not increase", line=int(rows.lines[back[0] + 1]))
     linear = np.column_stack([values[c] for c in ("vx", "vy", "vz")])
     angular = np.column_stack([values[c] for c in ("wx", "wy", "wz")])
-    lines = np.arange(len(rows)) + 2  # after the header
-    check_time_steps(path, stamps, limits, lines)
-    check_velocities(path, linear, angular, limits, lines)
+    check_time_steps(path, stamps, limits, rows.lines)
+    check_velocities(path, linear, angular, limits, rows.lines)
     return stamps, linear, angular
 
 
 def _read_detections(
-    folder: Path, frames: int
+    folder: Path, frames: int, classes: frozenset[str] | None
 ) -> tuple[tuple[tuple[ObjectObservation, ...], ...], tuple[tuple[int, ...], ...]]:
-    """Per frame, its observations and the detections.csv row of each."""
+    """Per frame, its observations (of `classes` only, when given) and the detections.csv row of each."""
     path = folder / "detections.csv"
     rows = read_table(path, DETECTION_COLUMNS)
     numeric = [c for c in DETECTION_COLUMNS if c != "label"]
@@ -193,10 +194,11 @@ def _read_detections(
     patches = _read_patches(folder / "patches.npy", len(rows))
     per_frame: list[list[ObjectObservation]] = [[] for _ in range(frames)]
     rows_of: list[list[int]] = [[] for _ in range(frames)]
-    for k, row in enumerate(rows):
+    for k, row in enumerate(rows.rows):
+        line = int(rows.lines[k])
         frame = values["frame"][k]
         if frame != int(frame) or not 0 <= frame < frames:
-            raise InputError(path, f"frame {frame:g} is not one of the {frames} frames", line=k + 2)
+            raise InputError(path, f"frame {frame:g} is not one of the {frames} frames", line=line)
         box = np.array([values[c][k] for c in BOX_COLUMNS])
         centre = np.array([values[c][k] for c in ("x", "y", "z")])
         problem = (
@@ -207,7 +209,9 @@ def _read_detections(
             or centre_problem(centre.tolist())
         )
         if problem is not None:
-            raise InputError(path, problem, line=k + 2)
+            raise InputError(path, problem, line=line)
+        if classes is not None and row[1] not in classes:
+            continue
         per_frame[int(frame)].append(
             ObjectObservation(row[1], float(values["score"][k]), box[:4], box[4:], centre, patches[k])
         )
@@ -253,16 +257,19 @@ def _read_patches(path: Path, count: int) -> np.ndarray:
     return patches
 
 
-def read_dataset(folder: Path, limits: MotionLimitsConfig | None = None) -> SimulatedDataset:
+def read_dataset(
+    folder: Path, limits: MotionLimitsConfig | None = None, classes: Collection[str] | None = None
+) -> SimulatedDataset:
     """Read a simulated dataset folder, its motion checked against `limits` (default: the default limits); ground
-    truth is attached when `truth/` exists."""
+    truth is attached when `truth/` exists. With `classes` (the detector's, perception.detector.classes), detections
+    of other labels are left out, as the real front end leaves them out."""
     if not folder.is_dir():
         raise InputError(folder, "dataset folder not found")
     meta = _read_meta(folder / "dataset.yaml")
     stamps, linear, angular = _read_frames(folder / "frames.csv", limits or MotionLimitsConfig())
     if meta.get("frames") != len(stamps):
         raise InputError(folder / "frames.csv", f"{len(stamps)} frames, dataset.yaml says {meta.get('frames')}")
-    observations, rows = _read_detections(folder, len(stamps))
+    observations, rows = _read_detections(folder, len(stamps), None if classes is None else frozenset(classes))
     truth_file = folder / "truth" / "poses_tum.txt"
     truth = read_tum(truth_file) if truth_file.is_file() else None
     if truth is not None and len(truth) != len(stamps):

@@ -14,6 +14,7 @@ import errno
 import os
 import shutil
 import signal
+import stat
 import threading
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager, suppress
@@ -91,12 +92,23 @@ def check_target(target: Path, overwrite: bool = False, inputs: Iterable[Path | 
         raise OutputError(f"{target}: folder exists and is not empty (pass --overwrite to replace it)")
 
 
+def _refuse_special(target: Path) -> None:
+    """Only a regular file is ever replaced: a device (/dev/null), a FIFO or a socket stays what it is."""
+    try:
+        mode = target.lstat().st_mode
+    except FileNotFoundError:
+        return
+    if stat.S_ISDIR(mode):
+        raise OutputError(f"{target}: is a folder, not a file")
+    if not stat.S_ISREG(mode) and not stat.S_ISLNK(mode):
+        raise OutputError(f"{target}: is a device, FIFO or socket, not a regular file; name a file to write")
+
+
 def check_target_file(target: Path, overwrite: bool = False, inputs: Iterable[Path | None] = ()) -> None:
     """Refuse an output file before any long work: a link, an input or a file inside an input folder, a folder,
-    or an existing file without `overwrite`."""
+    anything but a regular file, or an existing file without `overwrite`."""
     _check_common(target, inputs)
-    if target.is_dir():
-        raise OutputError(f"{target}: is a folder, not a file")
+    _refuse_special(target)
     if target.exists() and not overwrite:
         raise OutputError(f"{target}: file exists (pass --overwrite to replace it)")
 
@@ -161,6 +173,7 @@ def _publish_folder(staging: Path, target: Path, overwrite: bool) -> None:
 
 
 def _publish_file(staging: Path, target: Path, overwrite: bool) -> None:
+    _refuse_special(target)  # again: what was checked before the work may have been replaced since
     if overwrite:
         os.replace(staging, target)
         return

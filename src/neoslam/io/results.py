@@ -165,7 +165,7 @@ def read_loop_closures(path: Path, frames: int | None = None) -> list[LoopClosur
             continue
         problem = _check_loop_row(values, k, frames)
         if problem is not None:
-            raise InputError(path, problem, line=k + 2)
+            raise InputError(path, problem, line=int(rows.lines[k]))
         translation = [values[c][k] for c in ("tx", "ty", "tz")]
         quaternion = np.array([values[c][k] for c in ("qx", "qy", "qz", "qw")])
         quaternion /= np.linalg.norm(quaternion)

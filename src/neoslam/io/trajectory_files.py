@@ -19,6 +19,8 @@ from neoslam.types import Trajectory
 
 __all__ = [
     "KITTI_FRAME_PERIOD",
+    "MAX_POSITION_M",
+    "MAX_TIMESTAMP_S",
     "QUATERNION_NORM_TOLERANCE",
     "ROTATION_TOLERANCE",
     "read_tum",
@@ -42,6 +44,11 @@ QUATERNION_NORM_TOLERANCE = 1e-2
 # max |R R^T - I| allowed in a KITTI rotation block. The published ground truth is orthonormal to 3e-7; 1e-3
 # also admits float32 or hand-rounded estimates but rejects scaled, sheared or misread blocks.
 ROTATION_TOLERANCE = 1e-3
+
+# Largest position any trajectory holds, m (100,000 km: no drive goes further; beyond, squared errors overflow and
+# a metric is meaningless) and largest timestamp, s (about 30,000 years: Unix or GPS seconds fit many times over).
+MAX_POSITION_M = 1e8
+MAX_TIMESTAMP_S = 1e12
 
 # Commas with optional spaces, or runs of whitespace; "1,,2" yields an empty token, reported as not a number.
 _SEPARATOR = re.compile(r"\s*,\s*|\s+")
@@ -84,6 +91,15 @@ def _read_numbers(path: Path, columns: int) -> tuple[np.ndarray, np.ndarray]:
     return values, np.array([number for number, _ in rows])
 
 
+def _check_magnitude(path: Path, values: np.ndarray, lines: np.ndarray, limit: float, what: str) -> None:
+    """A value beyond `limit` in magnitude is a unit slip or a corrupt line, named with its line."""
+    rows = np.flatnonzero((np.abs(values) > limit).reshape(len(values), -1).any(axis=1))
+    if rows.size:
+        i = rows[0]
+        worst = np.abs(values[i]).max()
+        raise InputError(path, f"{what} of magnitude {worst:.3g} is beyond {limit:g}", int(lines[i]))
+
+
 def _check_increasing(path: Path, times: np.ndarray, lines: np.ndarray) -> None:
     step_back = np.flatnonzero(np.diff(times) <= 0)
     if step_back.size:
@@ -97,6 +113,7 @@ def read_times(path: str | Path) -> np.ndarray:
     """Strictly increasing timestamps in seconds, one per line (KITTI `times.txt`)."""
     path = Path(path)
     values, lines = _read_numbers(path, 1)
+    _check_magnitude(path, values, lines, MAX_TIMESTAMP_S, "timestamp")
     _check_increasing(path, values[:, 0], lines)
     return values[:, 0]
 
@@ -105,6 +122,8 @@ def read_tum(path: str | Path) -> Trajectory:
     """Robot poses from a TUM file `t x y z qx qy qz qw`; quaternions are normalised."""
     path = Path(path)
     values, lines = _read_numbers(path, _TUM_COLUMNS)
+    _check_magnitude(path, values[:, :1], lines, MAX_TIMESTAMP_S, "timestamp")
+    _check_magnitude(path, values[:, 1:4], lines, MAX_POSITION_M, "position")
     _check_increasing(path, values[:, 0], lines)
     quaternions = values[:, 4:8]
     norms = np.linalg.norm(quaternions, axis=1)
@@ -128,6 +147,7 @@ def read_kitti(
         raise ValueError(f"frame_period must be positive, got {frame_period}")
     path = Path(path)
     values, lines = _read_numbers(path, _KITTI_COLUMNS)
+    _check_magnitude(path, values[:, [3, 7, 11]], lines, MAX_POSITION_M, "position")
     camera_poses = np.tile(np.eye(4), (len(values), 1, 1))
     camera_poses[:, :3, :] = values.reshape(-1, 3, 4)
     rotations = camera_poses[:, :3, :3]

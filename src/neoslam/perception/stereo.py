@@ -158,10 +158,10 @@ def match_stereo_keypoints(
     return StereoMatches(points[keep], refined[keep])
 
 
-def _in_box(points: np.ndarray, box: np.ndarray) -> np.ndarray:
-    """Which rows of (x, y, z, u, v) points have their pixel inside the box."""
-    x1, y1, x2, y2 = box
-    return (points[:, 3] >= x1) & (points[:, 3] <= x2) & (points[:, 4] >= y1) & (points[:, 4] <= y2)
+def _in_boxes(points: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """(m, n): which rows of (x, y, z, u, v) points have their pixel inside which of the boxes (n, 4)."""
+    u, v = points[:, 3, None], points[:, 4, None]
+    return (u >= boxes[:, 0]) & (u <= boxes[:, 2]) & (v >= boxes[:, 1]) & (v <= boxes[:, 3])
 
 
 def _agreeing_points(inside: np.ndarray, config: StereoObjectConfig) -> np.ndarray | None:
@@ -211,19 +211,31 @@ class ObjectTriangulator:
         depth: where parked cars overlap in the image, the keypoints belong to the one in front, and a car mostly
         hidden by a nearer one would otherwise take the nearer one's depth."""
         first = [_agreeing_points(box_points, self.config) for box_points in points]
+        placed = np.array([other is not None for other in first], bool)
+        depth = np.array([np.median(other[:, 2]) if other is not None else np.nan for other in first])
+        band = np.array([np.ptp(other[:, 2]) / 2 if other is not None else np.nan for other in first])
         visible: list[np.ndarray | None] = []
         for k, box_points in enumerate(points):
-            hidden = np.zeros(len(box_points), bool)
-            for j, other in enumerate(first):
-                if j == k or other is None:
-                    continue
-                depth, band = np.median(other[:, 2]), np.ptp(other[:, 2]) / 2
-                hidden |= _in_box(box_points, boxes[j]) & (np.abs(box_points[:, 2] - depth) <= band)
-            visible.append(_agreeing_points(box_points[~hidden], self.config))
+            # (m points, n boxes) at once: inside box j and at its object's depth, for every other placed box j
+            others = placed.copy()
+            others[k] = False
+            hidden = _in_boxes(box_points, boxes[others]) & (
+                np.abs(box_points[:, 2, None] - depth[None, others]) <= band[None, others]
+            )
+            visible.append(_agreeing_points(box_points[~hidden.any(axis=1)], self.config))
         return visible
+
+    def _placed_boxes(self, detections: list[Detection]) -> list[Detection]:
+        """At most `max_boxes` detections, the highest scores first, kept in their order."""
+        if len(detections) <= self.config.max_boxes:
+            return detections
+        scores = np.array([d.score for d in detections])
+        kept = np.sort(np.argsort(-scores, kind="stable")[: self.config.max_boxes])
+        return [detections[i] for i in kept]
 
     def observe(self, left: np.ndarray, right: np.ndarray, detections: list[Detection]) -> list[ObjectObservation]:
         """Objects whose keypoints triangulate consistently, within the configured depth range."""
+        detections = self._placed_boxes(detections)
         boxes = np.array([d.box for d in detections], dtype=np.float64).reshape(-1, 4)
         points = [self._box_points(left, right, box) for box in boxes]
         visible = unhidden_shares(boxes) >= self.config.min_visible_share

@@ -24,6 +24,7 @@ full size each time they are logged, so they are logged when the map changes (a 
 
 from __future__ import annotations
 
+import shutil
 import time
 import uuid
 from collections.abc import Callable, Iterator, Sequence
@@ -58,6 +59,9 @@ def import_rerun() -> Any:
     return rerun
 
 
+VIEWER_EXECUTABLE = "rerun"  # the viewer rerun-sdk's spawn() starts, looked up on PATH
+
+
 def check_rerun_target(target: str | None) -> None:
     """Before any work: the --rerun value is SPAWN or a file ending .rrd, and Rerun is installed."""
     if target is None:
@@ -65,6 +69,8 @@ def check_rerun_target(target: str | None) -> None:
     if target != SPAWN and not target.endswith(".rrd"):
         raise ConfigError(f"--rerun takes no value (spawn the viewer) or a file ending .rrd, not {target!r}")
     import_rerun()
+    if target == SPAWN and shutil.which(VIEWER_EXECUTABLE) is None:
+        raise _viewer_missing()
 
 
 def recording_target(target: str | None, out: Path, staging: Path) -> str | None:
@@ -202,7 +208,7 @@ def rerun_session(
     rr = import_rerun()
     recording = rr.RecordingStream("neoslam", recording_id=uuid.uuid4())
     if target == SPAWN:
-        recording.spawn()
+        _spawn_viewer(recording)
         with _viewing(recording, dataset) as view:
             yield view
         return
@@ -213,6 +219,24 @@ def rerun_session(
                 yield view
         finally:
             recording.disconnect()
+
+
+def _spawn_viewer(recording: Any) -> None:
+    """Start the Rerun viewer; one line saying how to get it when its executable is not on PATH."""
+    try:
+        recording.spawn()
+    except RuntimeError as error:
+        if "executable" not in str(error):
+            raise
+        raise _viewer_missing() from None
+
+
+def _viewer_missing() -> ConfigError:
+    return ConfigError(
+        f"--rerun: the Rerun viewer (`{VIEWER_EXECUTABLE}`) is not on PATH; the viewer extra installs it into the "
+        'environment (pip install "neoslam[viewer]", then run with that environment\'s bin folder on PATH), or '
+        "record to a file with --rerun FILE.rrd"
+    )
 
 
 @contextmanager
