@@ -13,7 +13,7 @@ links, closures and OVCN losses are numbered by their position in the map's list
 | table | columns |
 |---|---|
 | `meta` | `key`, `value` (text): `format` = `neoslam-map`, `format_version` = `3`, `neoslam_version`, `config` (the config the map was made with, as JSON) |
-| `sessions` | `id`, `name` (dataset), `frames`, `relocalised_frame` (null: not joined the stored map) |
+| `sessions` | `id`, `name` (dataset; a BLOB of its bytes when they are not UTF-8), `frames`, `relocalised_frame` (null: not joined the stored map) |
 | `keyframes` | `id`, `frame`, `experience` (null: none), `pose` (4x4), `objects` (n), `centers` (n x 3), `labels` (JSON list of n strings), `patch_height`, `patch_width`, `patches` (n x h x w uint8), `provisional` (n uint8, 1: an object not known to be static yet), `covariances` (n x 2 x 2: each centre's ground-plane covariance from its views, m²) |
 | `experiences` | `id`, `session`, `frame`, `grid_cell` (3), `head_direction` (real, cells), `odometry_pose` (4x4), `linear_velocity` (3), `angular_velocity` (3), `keyframe` (null: none) |
 | `experience_poses` | `block`, `poses` (k x 4 x 4): the corrected poses, map frame, of experiences 30·block to 30·block + k - 1 (k = 30 but in the last block); blocks, not a row per experience, since a correction moves every pose: 1500 experiences are 50 rows of one page each |
@@ -29,14 +29,16 @@ The file header's application_id is 0x4E534C4D ("NSLM") and its user_version the
 row numbers (0 .. n-1); observations load sorted by (object, experience).
 
 A map is opened only by the NeoSLAM version that made it and with the same settings of the sections in
-MAP_SECTIONS; anything else (and a file that is not a map, or is corrupt) is refused with one line naming the
-problem, and a refused file is never modified. A run holds the file locked while it writes (a second run is refused:
+MAP_SECTIONS; anything else (and a file that is not a map, or is corrupt, down to one value that is not finite or
+one id no row has: neoslam.store.reading) is refused with one line naming the problem, and a refused file is never
+modified: it is read whole and checked before it is opened for writing. A run holds the file locked while it writes (a second run is refused:
 "in use"). Every commit survives a killed process; `map_store.synchronous: full` makes it survive a power cut too.
 A map a killed run left in write-ahead-log mode is recovered by the next run that opens it for writing; opened
 read-only it is read from a private copy of it and its log, and left exactly as it is.
 
 Here: making, opening (connections, the lock, private copies) and closing the file, loading, and committing. Whether a
-file may be opened is decided in neoslam.store.validation, what a commit writes in neoslam.store.changes.
+file may be opened is decided in neoslam.store.validation, whether its rows hold a map in neoslam.store.reading, what
+a commit writes in neoslam.store.changes.
 """  # noqa: E501
 
 from __future__ import annotations

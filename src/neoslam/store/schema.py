@@ -1,5 +1,6 @@
-"""The map file's SQLite schema, how records become rows and rows records again (see neoslam.store.map_file for
-the format; opening the file lives there, checking it in neoslam.store.validation, commits in neoslam.store.changes).
+"""The map file's SQLite schema and how records become rows (see neoslam.store.map_file for the format; opening the
+file lives there, checking it in neoslam.store.validation, rows read back into records in neoslam.store.reading,
+commits in neoslam.store.changes).
 
 Every array is a BLOB of little-endian raw bytes of the dtype its column names (`<f8` unless said otherwise), with
 its shape fixed by the column (a pose is 4x4) or given by other columns of the row. No pickle, no numpy headers.
