@@ -49,7 +49,12 @@ class Growth:
     hd_cells: int = 5
     second_session: int = 6  # the step from which the second session runs
     correction_every: int = 3  # steps between corrections that move every pose
-    weights: tuple[tuple[str, tuple[int, ...]], ...] = (("hidden.weight", (32, 3)), ("hidden.bias", (32,)))
+    weights: tuple[tuple[str, tuple[int, ...]], ...] = (  # the OVCN's parameters (a map holds them all)
+        ("hidden.weight", (32, 3)),
+        ("hidden.bias", (32,)),
+        ("output.weight", (1, 32)),
+        ("output.bias", (1,)),
+    )
 
     def experiences(self, step: int) -> int:
         return int(step * self.experiences_per_step) + 1
@@ -133,7 +138,7 @@ class Growth:
             for i in range(4, step, 5)
         ]
         sessions = [SessionRecord(1, "first drive", 10 * min(step, self.second_session), None)]
-        if step > self.second_session:
+        if step >= self.second_session:  # from the step that made its first experience
             relocalised = 10 * (self.second_session + 2) if step > self.second_session + 2 else None
             sessions.append(SessionRecord(2, "second drive", 10 * (step - self.second_session), relocalised))
         hebbian = {i: self.trace(i) for i in range(step) if i % 4 != 3 and (i >= 2 or step >= 2)}

@@ -13,7 +13,7 @@ links, closures and OVCN losses are numbered by their position in the map's list
 | table | columns |
 |---|---|
 | `meta` | `key`, `value` (text): `format` = `neoslam-map`, `format_version` = `3`, `neoslam_version`, `config` (the config the map was made with, as JSON) |
-| `sessions` | `id`, `name` (dataset), `frames`, `relocalised_frame` (null: not joined the stored map) |
+| `sessions` | `id`, `name` (dataset; a BLOB of its bytes when they are not UTF-8), `frames`, `relocalised_frame` (null: not joined the stored map) |
 | `keyframes` | `id`, `frame`, `experience` (null: none), `pose` (4x4), `objects` (n), `centers` (n x 3), `labels` (JSON list of n strings), `patch_height`, `patch_width`, `patches` (n x h x w uint8), `provisional` (n uint8, 1: an object not known to be static yet), `covariances` (n x 2 x 2: each centre's ground-plane covariance from its views, m²) |
 | `experiences` | `id`, `session`, `frame`, `grid_cell` (3), `head_direction` (real, cells), `odometry_pose` (4x4), `linear_velocity` (3), `angular_velocity` (3), `keyframe` (null: none) |
 | `experience_poses` | `block`, `poses` (k x 4 x 4): the corrected poses, map frame, of experiences 30·block to 30·block + k - 1 (k = 30 but in the last block); blocks, not a row per experience, since a correction moves every pose: 1500 experiences are 50 rows of one page each |
@@ -29,14 +29,16 @@ The file header's application_id is 0x4E534C4D ("NSLM") and its user_version the
 row numbers (0 .. n-1); observations load sorted by (object, experience).
 
 A map is opened only by the NeoSLAM version that made it and with the same settings of the sections in
-MAP_SECTIONS; anything else (and a file that is not a map, or is corrupt) is refused with one line naming the
-problem, and a refused file is never modified. A run holds the file locked while it writes (a second run is refused:
+MAP_SECTIONS; anything else (and a file that is not a map, or is corrupt, down to one value that is not finite or
+one id no row has: neoslam.store.reading) is refused with one line naming the problem, and a refused file is never
+modified: it is read whole and checked before it is opened for writing. A run holds the file locked while it writes (a second run is refused:
 "in use"). Every commit survives a killed process; `map_store.synchronous: full` makes it survive a power cut too.
 A map a killed run left in write-ahead-log mode is recovered by the next run that opens it for writing; opened
 read-only it is read from a private copy of it and its log, and left exactly as it is.
 
 Here: making, opening (connections, the lock, private copies) and closing the file, loading, and committing. Whether a
-file may be opened is decided in neoslam.store.validation, what a commit writes in neoslam.store.changes.
+file may be opened is decided in neoslam.store.validation, whether its rows hold a map in neoslam.store.reading, what
+a commit writes in neoslam.store.changes.
 """  # noqa: E501
 
 from __future__ import annotations
@@ -55,7 +57,8 @@ from neoslam import __version__
 from neoslam.config import NeoSLAMConfig
 from neoslam.errors import InputError, OutputError
 from neoslam.store.changes import WrittenState
-from neoslam.store.schema import APPLICATION_ID, FORMAT_TAG, FORMAT_VERSION, STATEMENTS, TABLES, read_state
+from neoslam.store.reading import CorruptRow, MapLimits, read_state
+from neoslam.store.schema import APPLICATION_ID, FORMAT_TAG, FORMAT_VERSION, STATEMENTS, TABLES
 from neoslam.store.validation import MAP_SECTIONS, locked, read_header, validate
 from neoslam.types import MapState
 
@@ -70,13 +73,21 @@ class MapFile:
     manager or `close` it (which leaves one self-contained file)."""
 
     def __init__(
-        self, path: Path, connection: sqlite3.Connection, read_only: bool, scratch: Path | None, empty: bool
+        self,
+        path: Path,
+        connection: sqlite3.Connection,
+        read_only: bool,
+        scratch: Path | None,
+        limits: MapLimits,
+        read: MapState | None = None,
     ) -> None:
         self.path = path
         self.read_only = read_only
         self._connection: sqlite3.Connection | None = connection
         self._scratch = scratch  # a private copy a read-only map is read from (a map left with a write-ahead log)
-        self._written: WrittenState | None = WrittenState() if empty else None  # None: load() before commit()
+        self._limits = limits
+        self._read = read  # the map as open() read and checked it, which the first load() gives
+        self._written: WrittenState | None = WrittenState() if read is None else None  # None: load() before commit()
 
     @classmethod
     def create(cls, path: Path, config: NeoSLAMConfig) -> MapFile:
@@ -104,27 +115,35 @@ class MapFile:
             for leftover in (partial, Path(f"{partial}-journal")):
                 leftover.unlink(missing_ok=True)
         _sync_folder(path.parent)
-        return cls(path, _writer(path, config), read_only=False, scratch=None, empty=True)
+        return cls(path, _writer(path, config), read_only=False, scratch=None, limits=_limits(config))
 
     @classmethod
     def open(cls, path: Path, config: NeoSLAMConfig, read_only: bool = False) -> MapFile:
-        """An existing map, checked before anything is written to it: refused with InputError (the file untouched)
-        when it is not a NeoSLAM map, is corrupt, or was made by another version or with another config."""
+        """An existing map, read whole and checked before anything is written to it: refused with InputError (the
+        file untouched) when it is not a NeoSLAM map, is corrupt (down to a value that is not finite or an id no
+        row has), or was made by another version or with another config. Only then is it opened for writing."""
         path = Path(path)
         header = read_header(path)
+        limits = _limits(config)
         connection, scratch = _reader(path, header)
         try:
             validate(connection, path, config)
+            state = _read_state(connection, path, limits)
+            seen = _summary(connection, path)
         except BaseException:
             connection.close()
             _remove(scratch)
             raise
         if read_only:
             connection.execute("PRAGMA query_only = ON")
-            return cls(path, connection, read_only=True, scratch=scratch, empty=False)
+            return cls(path, connection, read_only=True, scratch=scratch, limits=limits, read=state)
         connection.close()
         _remove(scratch)
-        return cls(path, _writer(path, config), read_only=False, scratch=None, empty=False)
+        map_file = cls(path, _writer(path, config), read_only=False, scratch=None, limits=limits, read=state)
+        if _summary(map_file._open_connection, path) != seen:  # another run wrote it between the read and the lock
+            map_file.close()
+            raise InputError(path, "changed by another run while this one opened it; run again")
+        return map_file
 
     def __enter__(self) -> MapFile:
         return self
@@ -143,10 +162,9 @@ class MapFile:
     def load(self) -> MapState:
         """Everything the file holds; it also becomes what the next commit is compared against."""
         connection = self._open_connection
-        try:
-            state = read_state(connection)
-        except (sqlite3.DatabaseError, ValueError, KeyError, TypeError) as error:
-            raise InputError(self.path, f"corrupt map file ({error})") from None
+        state, self._read = self._read, None
+        if state is None:
+            state = _read_state(connection, self.path, self._limits)
         self._written = WrittenState.of(state)
         return state
 
@@ -188,6 +206,54 @@ class MapFile:
             connection.close()
             _remove(self._scratch)
             self._scratch = None
+
+
+# Reading
+
+
+def _read_state(connection: sqlite3.Connection, path: Path, limits: MapLimits) -> MapState:
+    """The map the file holds, every value checked; InputError naming the table and row of the first problem."""
+    try:
+        return read_state(connection, limits)
+    except CorruptRow as error:
+        raise InputError(path, f"corrupt map file ({error})") from None
+    except sqlite3.DatabaseError as error:
+        if locked(error):
+            raise InputError(path, "in use by another run (the map file is locked)") from None
+        raise InputError(path, f"corrupt map file ({error})") from None
+    except (ValueError, KeyError, TypeError, OverflowError) as error:  # a row the checks did not foresee
+        raise InputError(path, f"corrupt map file ({error})") from None
+    except MemoryError:
+        raise InputError(path, "too large to load into this machine's memory") from None
+
+
+def _summary(connection: sqlite3.Connection, path: Path) -> tuple[object, ...]:
+    """What any commit changes (every commit writes its session's row), to tell whether the file changed."""
+    try:
+        sessions = connection.execute("SELECT * FROM sessions ORDER BY id").fetchall()
+        counts = connection.execute(
+            "SELECT (SELECT count(*) FROM keyframes), (SELECT count(*) FROM experiences), (SELECT count(*) FROM links)"
+        ).fetchone()
+    except sqlite3.DatabaseError as error:
+        raise InputError(path, f"corrupt map file ({error})") from None
+    return tuple(sessions), tuple(counts)
+
+
+def _limits(config: NeoSLAMConfig) -> MapLimits:
+    """What the config fixes about a map's contents (the OVCN's parameter shapes asked of the OVCN itself, only for
+    a map that holds OVCN weights)."""
+    return MapLimits(
+        grid_cells=tuple(int(size) for size in config.grid_cells.dims),
+        head_direction_cells=int(config.head_direction.cells),
+        epochs=int(config.object_vector.epochs),
+        object_vector_shapes=lambda: _object_vector_shapes(config),
+    )
+
+
+def _object_vector_shapes(config: NeoSLAMConfig) -> dict[str, tuple[int, ...]]:
+    from neoslam.cells.object_vector import ObjectVectorCells  # here: torch loads in a second, and few maps need it
+
+    return {name: tuple(value.shape) for name, value in ObjectVectorCells(config.object_vector).weights().items()}
 
 
 # Connections and the file beside them

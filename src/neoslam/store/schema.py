@@ -1,5 +1,6 @@
-"""The map file's SQLite schema, how records become rows and rows records again (see neoslam.store.map_file for
-the format; opening the file lives there, checking it in neoslam.store.validation, commits in neoslam.store.changes).
+"""The map file's SQLite schema and how records become rows (see neoslam.store.map_file for the format; opening the
+file lives there, checking it in neoslam.store.validation, rows read back into records in neoslam.store.reading,
+commits in neoslam.store.changes).
 
 Every array is a BLOB of little-endian raw bytes of the dtype its column names (`<f8` unless said otherwise), with
 its shape fixed by the column (a pose is 4x4) or given by other columns of the row. No pickle, no numpy headers.
@@ -9,7 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import sqlite3
 from collections.abc import Mapping
 from typing import Any
 
@@ -20,9 +20,6 @@ from neoslam.types import (
     HebbianTrace,
     Keyframe,
     Link,
-    LoopClosure,
-    MapState,
-    ObjectMapState,
     SessionRecord,
     StoredClosure,
 )
@@ -51,7 +48,8 @@ __all__ = [
     "link_row",
     "closure_row",
     "hebbian_row",
-    "read_state",
+    "stored_name",
+    "read_name",
 ]
 
 FORMAT_TAG = "neoslam-map"
@@ -175,6 +173,25 @@ def _first_difference(stored: dict[str, Any], current: dict[str, Any], key: str,
     return None if old == new else f"made with {where} = {old!r}; this run has {new!r}"
 
 
+def stored_name(name: str) -> str | bytes:
+    """A session's name as the file stores it: text when it is UTF-8, else the bytes `os.fsencode` gives (a dataset
+    named by a file name that is not UTF-8), so that `read_name` gives the same name back."""
+    try:
+        name.encode("utf-8")
+    except UnicodeEncodeError:
+        return name.encode("utf-8", "surrogateescape" if _escapes_only(name) else "surrogatepass")
+    return name
+
+
+def read_name(value: str | bytes) -> str:
+    """The name `stored_name` stored: bytes that are not UTF-8 come back as the surrogate escapes os.fsdecode gives."""
+    return value if isinstance(value, str) else value.decode("utf-8", "surrogateescape")
+
+
+def _escapes_only(name: str) -> bool:
+    return all(not 0xD800 <= ord(c) <= 0xDFFF or 0xDC80 <= ord(c) <= 0xDCFF for c in name)
+
+
 # The statements a commit runs (executemany), by name.
 STATEMENTS = {
     "session": "INSERT INTO sessions (id, name, frames, relocalised_frame) VALUES (?, ?, ?, ?) ON CONFLICT (id) DO "
@@ -209,7 +226,7 @@ STATEMENTS = {
 
 def session_row(record: SessionRecord) -> tuple[Any, ...]:
     relocalised = None if record.relocalised_frame is None else int(record.relocalised_frame)
-    return int(record.id), str(record.name), int(record.frames), relocalised
+    return int(record.id), stored_name(str(record.name)), int(record.frames), relocalised
 
 
 def keyframe_row(keyframe: Keyframe, experience: int | None) -> tuple[Any, ...]:
@@ -286,124 +303,3 @@ def hebbian_row(keyframe_id: int, trace: HebbianTrace) -> tuple[Any, ...]:
         int(trace.hd_peak),
         float(trace.strength),
     )
-
-
-# Rows as records
-
-
-def read_state(connection: sqlite3.Connection) -> MapState:
-    """Everything a map file holds (sqlite3.DatabaseError or ValueError for a file that holds it wrongly)."""
-
-    def rows(sql: str) -> list[tuple[Any, ...]]:
-        return connection.execute(sql).fetchall()
-
-    state = MapState()
-    state.sessions = [SessionRecord(*row) for row in rows("SELECT * FROM sessions ORDER BY id")]
-    for kf_id, frame, experience, pose, n, centers, labels, height, width, patches, provisional, covariances in rows(
-        "SELECT * FROM keyframes ORDER BY id"
-    ):
-        names = tuple(json.loads(labels))
-        if len(names) != n or not all(isinstance(name, str) for name in names):
-            raise ValueError(f"keyframe {kf_id} has {len(names)} labels for {n} objects")
-        state.keyframes.append(
-            Keyframe(
-                kf_id,
-                frame,
-                decode(pose, F8, POSE),
-                decode(centers, F8, (n, 3)),
-                names,
-                decode(patches, U1, (n, height, width)),
-                decode(provisional, U1, (n,)).astype(bool),
-                decode(covariances, F8, (n, 2, 2)),
-            )
-        )
-        if experience is not None:
-            state.keyframe_experience[kf_id] = experience
-    for exp_id, session, frame, grid, heading, pose, linear, angular, keyframe in rows(
-        "SELECT * FROM experiences ORDER BY id"
-    ):
-        if exp_id != len(state.experiences):
-            raise ValueError(f"experience {exp_id} where {len(state.experiences)} was expected")
-        state.experiences.append(
-            Experience(
-                exp_id,
-                frame,
-                decode(grid, F8, VECTOR),
-                float(heading),
-                decode(pose, F8, POSE),
-                decode(linear, F8, VECTOR),
-                decode(angular, F8, VECTOR),
-                keyframe,
-                session,
-            )
-        )
-    blocks = rows("SELECT block, poses FROM experience_poses ORDER BY block")
-    if [block for block, _ in blocks] != list(range(len(blocks))):
-        raise ValueError("the corrected poses skip a block")
-    poses = b"".join(data for _, data in blocks)
-    n = len(state.experiences)
-    state.experience_poses = decode(poses, F8, (n, *POSE)) if len(poses) == n * POSE_SIZE else None
-    if state.experience_poses is None:
-        raise ValueError(f"{len(poses) // POSE_SIZE} corrected poses for {n} experiences")
-    for position, (link_id, source, target, relative, kind, distance) in enumerate(
-        rows("SELECT * FROM links ORDER BY id")
-    ):
-        _check_position("link", link_id, position)
-        state.links.append(Link(source, target, decode(relative, F8, POSE), kind, float(distance)))
-    for position, (closure_id, session, match_session, *numbers, relative) in enumerate(
-        rows("SELECT * FROM closures ORDER BY id")
-    ):
-        _check_position("closure", closure_id, position)
-        query_frame, match_frame, query_keyframe, match_keyframe, score, n_matches = numbers
-        closure = LoopClosure(
-            query_frame,
-            match_frame,
-            query_keyframe,
-            match_keyframe,
-            float(score),
-            n_matches,
-            decode(relative, F8, POSE),
-        )
-        state.closures.append(StoredClosure(session, match_session, closure))
-    state.objects = _load_objects(rows)
-    for keyframe, gc_n, gc_indices, gc_weights, hd_n, hd_indices, hd_weights, x, y, z, hd_peak, strength in rows(
-        "SELECT * FROM hebbian ORDER BY keyframe"
-    ):
-        state.hebbian[keyframe] = HebbianTrace(
-            decode(gc_indices, I4, (gc_n,), writable=False),
-            decode(gc_weights, F4, (gc_n,), writable=False),
-            decode(hd_indices, I4, (hd_n,), writable=False),
-            decode(hd_weights, F4, (hd_n,), writable=False),
-            (x, y, z),
-            hd_peak,
-            float(strength),
-        )
-    for _, name, dtype, shape, data in rows("SELECT * FROM object_vector ORDER BY position"):
-        state.object_vector_weights[name] = decode(data, FLOAT_DTYPES[dtype], tuple(json.loads(shape)))
-    for position, (epoch, loss) in enumerate(rows("SELECT * FROM object_vector_losses ORDER BY epoch")):
-        _check_position("OVCN epoch", epoch, position)
-        state.object_vector_losses.append(float(loss))
-    return state
-
-
-def _load_objects(rows) -> ObjectMapState:
-    objects = rows("SELECT * FROM objects ORDER BY id")
-    for position, row in enumerate(objects):
-        _check_position("object", row[0], position)
-    pairs = rows("SELECT * FROM object_observations ORDER BY object, experience")
-    return ObjectMapState(
-        labels=[row[1] for row in objects],
-        sums=decode_rows([row[2] for row in objects], F8, VECTOR),
-        weights=np.array([row[3] for row in objects], dtype=float),
-        counts=np.array([row[4] for row in objects], dtype=int),
-        pair_object=np.array([row[0] for row in pairs], dtype=int),
-        pair_experience=np.array([row[1] for row in pairs], dtype=int),
-        pair_sums=decode_rows([row[2] for row in pairs], F8, VECTOR),
-        pair_weights=np.array([row[3] for row in pairs], dtype=float),
-        pair_counts=np.array([row[4] for row in pairs], dtype=int),
-    )
-
-
-def _check_position(what: str, stored_id: int, position: int) -> None:
-    if stored_id != position:
-        raise ValueError(f"{what} {stored_id} where {position} was expected")

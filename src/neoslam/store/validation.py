@@ -6,7 +6,10 @@ naming one problem; nothing here writes to the file.
 from __future__ import annotations
 
 import json
+import os
 import sqlite3
+import stat
+from contextlib import suppress
 from pathlib import Path
 
 from neoslam import __version__
@@ -23,19 +26,34 @@ _EXTENDED = "a map is extended with the config it was made with"
 
 
 def read_header(path: Path) -> bytes:
-    """The file's first 100 bytes, once it is a regular file with SQLite's header and NeoSLAM's application id
-    (read before connecting: another program's database is refused without being opened, let alone copied)."""
-    if not path.exists():
-        raise InputError(path, "map not found")
-    if path.is_dir():
-        raise InputError(path, "a folder, not a NeoSLAM map file")
-    if not path.is_file():
-        raise InputError(path, "not a regular file, so not a NeoSLAM map")
+    """The file's first 100 bytes, once it is a regular file with SQLite's header, NeoSLAM's application id and
+    this format version as its user_version, small enough to load (read before connecting: another program's
+    database is refused without being opened, let alone copied). A FIFO or a device (or a link to one) is refused
+    without being read: it is opened without blocking and checked again once open."""
     try:
-        with path.open("rb") as file:
-            header = file.read(_HEADER_SIZE)
+        kind = _kind(os.stat(path).st_mode)
+    except FileNotFoundError:
+        raise InputError(path, "map not found") from None
     except OSError as error:
         raise InputError(path, f"cannot be read ({error.strerror})") from None
+    if kind == "a folder":
+        raise InputError(path, "a folder, not a NeoSLAM map file")
+    if kind is not None:
+        raise InputError(path, f"{kind}, not a regular file, so not a NeoSLAM map")
+    try:
+        descriptor = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0))
+    except OSError as error:
+        raise InputError(path, f"cannot be read ({error.strerror})") from None
+    try:
+        status = os.fstat(descriptor)
+        kind = _kind(status.st_mode)  # replaced by another kind of file since the first look
+        if kind is not None:
+            raise InputError(path, f"{kind}, not a regular file, so not a NeoSLAM map")
+        header = os.read(descriptor, _HEADER_SIZE)
+    except OSError as error:
+        raise InputError(path, f"cannot be read ({error.strerror})") from None
+    finally:
+        os.close(descriptor)
     if not header:
         raise InputError(path, "empty file, not a NeoSLAM map")
     if header[: len(_SQLITE_MAGIC)] != _SQLITE_MAGIC[: len(header)]:
@@ -44,7 +62,55 @@ def read_header(path: Path) -> bytes:
         raise InputError(path, f"corrupt map file (truncated to {len(header)} bytes)")
     if int.from_bytes(header[68:72], "big") != APPLICATION_ID:  # set when the map is made, never changed
         raise InputError(path, "a SQLite database but not a NeoSLAM map")
+    user_version = int.from_bytes(header[60:64], "big", signed=True)  # the format version, set when it is made
+    if user_version <= 0:  # never set: SQLite's default, so another program's database with the same id
+        raise InputError(
+            path,
+            f"a SQLite database but not a NeoSLAM map (its header's user_version is {user_version}; a map's is its "
+            f"format version, {FORMAT_VERSION})",
+        )
+    if user_version != FORMAT_VERSION:
+        newer = " (a newer NeoSLAM's)" if user_version > FORMAT_VERSION else ""
+        raise InputError(
+            path,
+            f"map format version {user_version}{newer} in its header's user_version; this NeoSLAM reads version "
+            f"{FORMAT_VERSION}",
+        )
+    _check_size(path, status.st_size)
     return header
+
+
+def _kind(mode: int) -> str | None:
+    """What a file that is not a regular file is (None: a regular file)."""
+    if stat.S_ISREG(mode):
+        return None
+    for test, kind in (
+        (stat.S_ISDIR, "a folder"),
+        (stat.S_ISFIFO, "a named pipe (FIFO)"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISSOCK, "a socket"),
+    ):
+        if test(mode):
+            return kind
+    return "a special file"
+
+
+def _check_size(path: Path, size: int) -> None:
+    """Refuse a map larger than this machine's memory: loading reads it whole (its arrays take about the room they
+    take in the file), and a map too large would be killed half-loaded rather than refused."""
+    with suppress(FileNotFoundError):
+        size += os.stat(f"{path}-wal").st_size  # a run killed while writing: its log is read too
+    try:
+        memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):  # not known here: nothing to compare with
+        return
+    if memory > 0 and size > memory:
+        raise InputError(path, f"too large to load ({_size(size)}; this machine has {_size(memory)} of memory)")
+
+
+def _size(count: int) -> str:
+    return f"{count / 2**30:.1f} GiB" if count >= 2**30 else f"{count / 2**20:.1f} MiB"
 
 
 def validate(connection: sqlite3.Connection, path: Path, config: NeoSLAMConfig) -> None:
