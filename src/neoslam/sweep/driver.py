@@ -39,7 +39,7 @@ import yaml
 
 from neoslam.errors import OutputError
 from neoslam.io.atomic import atomic_directory, atomic_file, check_target
-from neoslam.sweep.cells import Cell, Plan, axes_that_vary, expand
+from neoslam.sweep.cells import DEFAULT_MEASURE, Cell, Plan, axes_that_vary, expand
 from neoslam.sweep.executors import Executor, LocalPool
 from neoslam.sweep.runner import Measure, Outcome, Task
 from neoslam.sweep.spec import Spec
@@ -49,7 +49,6 @@ __all__ = ["CellRecord", "SweepResult", "run_sweep", "measure_name", "FORMAT", "
 
 FORMAT, VERSION = "neoslam-sweep", 1
 MARKER = "sweep.json"
-DEFAULT_MEASURE = "neoslam.commands.run.run_dataset"
 
 
 @dataclass(frozen=True)
