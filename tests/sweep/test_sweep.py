@@ -25,6 +25,8 @@ from neoslam.errors import OutputError
 from neoslam.sweep import InProcess, LocalPool, RayCluster, load_spec, parse_spec, run_sweep
 from neoslam.sweep.cells import code_version
 from neoslam.sweep.runner import Task, run_task
+from neoslam.sweep.spec import KNOWN_METRICS
+from neoslam.sweep.table import flatten, split_timing
 
 SPEC = {
     "name": "tiny",
@@ -97,6 +99,14 @@ def test_pool_sweep_writes_a_row_per_cell(pooled) -> None:
     assert "| noise | cells | failed | ate_rmse_m.corrected | keyframes |" in summary
     assert result.summary == summary
     assert json.loads((out / "sweep.json").read_text()) == {"format": "neoslam-sweep", "version": 1, "name": "tiny"}
+
+
+@pytest.mark.slow
+def test_the_known_metrics_are_the_numbers_a_run_measures(pooled) -> None:
+    metrics = pooled[1].records[0].metrics
+    computed, _ = split_timing(flatten(metrics))
+    numbers = {k for k, v in computed.items() if not isinstance(v, str)}  # None: a figure the drive did not support
+    assert numbers == set(KNOWN_METRICS)
 
 
 @pytest.mark.slow
