@@ -93,7 +93,8 @@ def _end_worker(signum: int, _frame: object) -> None:
 
 def _end_with(parent: int) -> None:
     """SIGTERM to this process when `parent` ends: from the kernel on Linux (PR_SET_PDEATHSIG), elsewhere from a
-    thread that looks for a new parent twice a second."""
+    thread that looks for a new parent twice a second. The kernel's signal follows the parent's thread that started
+    this process: the pool starts its workers from the thread that then waits for them."""
     if sys.platform.startswith("linux"):
         try:
             libc = ctypes.CDLL(None, use_errno=True)
