@@ -11,7 +11,7 @@ from neoslam.commands.run import with_backend
 from neoslam.config import NeoSLAMConfig, load_config
 from neoslam.config.profiles import simulation_config
 from neoslam.sweep import expand, parse_spec
-from neoslam.sweep.cells import axes_that_vary
+from neoslam.sweep.cells import ID_LENGTH, RUN_ONLY_SECTIONS, axes_that_vary, content_hash
 from neoslam.sweep.driver import _tasks
 
 
@@ -125,3 +125,19 @@ def test_a_config_file_lies_under_the_overrides(tmp_path: Path) -> None:
     assert plan.cells[0].config.matching.min_support == 3
     assert tmp_path / "base.yaml" in plan.inputs
     assert NeoSLAMConfig().matching.min_support != 3
+
+
+def test_a_cell_id_is_the_hash_of_its_whole_resolved_config(tmp_path: Path) -> None:
+    overrides = {"a": {}, "fixed": {"simulator": {"seed": 5}}, "b": {"experience_map": {"backend": "relaxation"}}}
+    spec = _spec(tmp_path, noise=["vo", "heavy"], seeds=[0, 7, 42, 123456789012], overrides=overrides)
+    plan = expand(spec, environ={})
+    for cell in plan.cells:
+        content = plan.sources[cell.source].content
+        resolved = cell.config.model_dump(mode="json")
+        assert cell.id == content_hash(content, resolved, plan.code_version, plan.measure)[:ID_LENGTH]
+        simulated = {k: v for k, v in resolved.items() if k not in RUN_ONLY_SECTIONS}
+        assert cell.simulation == content_hash(content, simulated)[:ID_LENGTH]
+        assert resolved["simulator"]["seed"] == (5 if cell.override == "fixed" else cell.seed)
+    assert len({id(c.setting) for c in plan.cells}) == 2 * 3  # a config checked per noise and override, not per seed
+    fixed = {c.id for c in plan.cells if c.override == "fixed" and c.noise == "vo"}
+    assert len(fixed) == 1  # the override's seed wins: one run

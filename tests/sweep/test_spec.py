@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -62,7 +63,7 @@ def test_good_spec_reads(tmp_path: Path) -> None:
         ("name: x\nsources: [{route: block, format: tum}]\n", "sources[0]: format: applies to trajectory sources"),
         ("name: x\nsources: []\n", "sources: List should have at least 1 item"),
         ("sources: [{route: block}]\n", "name: Field required"),
-        ("name: x\nsources: [{route: block}]\nseeds: [1, 1]\n", "seeds: each value once"),
+        ("name: x\nsources: [{route: block}]\nseeds: [1, 2, 1]\n", "seeds: each value once (1 is given twice)"),
         ("name: x\nsources: [{route: block}]\ncolumns: [speed]\n", "columns: 'speed' is not an axis"),
         ("name: x\nsources: [{route: block}]\nbogus: 1\n", "bogus: unknown field"),
         ("name: x\nsources: [{route: block, frames: 0}]\n", "sources[0].frames: Input should be greater than 1"),
@@ -91,6 +92,11 @@ def test_spec_mistakes_are_one_line(tmp_path: Path, text: str, expected: str) ->
         ("cells: [{source: nowhere}]", "cells[0].source: no source named 'nowhere'"),
         ("cells: [{source: block, seed: 9}]", "cells[0].seed: 9 is not in the spec's list [1]"),
         ("config: missing.yaml", "config: file not found:"),
+        ("config: .", "config: is a folder, not a file:"),
+        ("seeds: [3, -1]", "seeds[1]: Input should be greater than or equal to 0 (got -1)"),
+        ("metrics: [keyframes, loops.recall, ate_rsme]", "metrics[2]: unknown metric 'ate_rsme'; known: frames, "),
+        ("metrics: [experience_map.backend]", "metrics[0]: unknown metric 'experience_map.backend'"),  # not a number
+        ("metrics: [timing.fps]", "metrics[0]: unknown metric 'timing.fps'"),  # the machine's: not in the table
     ],
 )
 def test_expansion_mistakes_are_one_line(tmp_path: Path, text: str, expected: str) -> None:
@@ -120,3 +126,53 @@ def test_cli_refuses_a_bad_spec_in_one_line(tmp_path: Path) -> None:
     assert len(lines) == 1
     assert lines[0].startswith(f"neoslam: error: {spec}: overrides.a.matching.min_inliers: Input should be greater")
     assert not (tmp_path / "out").exists()
+
+
+def test_every_metric_name_is_checked_before_any_work(tmp_path: Path) -> None:
+    spec = _spec(tmp_path, "name: x\nsources: [{route: block}]\nmetrics: [ate_rmse_m.corrected, ate_rsme]\n")
+    result = CliRunner().invoke(app, ["sweep", str(spec), "--out", str(tmp_path / "out"), "--workers", "0"])
+    assert result.exit_code == 2
+    [line] = result.output.strip().splitlines()
+    assert line.startswith(f"neoslam: error: {spec}: metrics[1]: unknown metric 'ate_rsme'; known: frames, ")
+    assert "ate_rmse_m.corrected" in line and not (tmp_path / "out").exists()
+
+
+def test_a_measure_of_ones_own_names_its_own_metrics(tmp_path: Path) -> None:
+    spec = load_spec(_spec(tmp_path, "name: x\nsources: [{route: block}]\nmetrics: [pipeline.ate_m]\n"))
+    assert len(expand(spec, environ={}, measure="mine.py:measure:0").cells) == 1
+
+
+def test_a_seed_is_named_by_its_place_in_the_list(tmp_path: Path) -> None:
+    text = "name: x\nsources: [{route: block}]\nseeds: [1, -1]\noverrides: {a: {}, b: {matching: {min_inliers: 5}}}\n"
+    assert _problem(tmp_path, text) == "seeds[1]: Input should be greater than or equal to 0 (got -1)"
+
+
+def test_a_long_seed_list_is_not_spelled_out(tmp_path: Path) -> None:
+    seeds = ", ".join(str(i) for i in range(10_000))
+    message = _problem(
+        tmp_path, f"name: x\nsources: [{{route: block}}]\nseeds: [{seeds}]\ncells: [{{source: block, seed: -5}}]\n"
+    )
+    assert message == "cells[0].seed: -5 is not in the spec's list [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, ... (10000 values)]"
+
+
+@pytest.mark.parametrize("kind", ["folder", "pipe"])
+def test_a_spec_that_is_not_a_file_is_refused_at_once(tmp_path: Path, kind: str) -> None:
+    spec = tmp_path / "spec.yaml"
+    if kind == "folder":
+        spec.mkdir()
+    else:
+        os.mkfifo(spec)  # nobody writes it: opening it would wait forever
+    result = CliRunner().invoke(app, ["sweep", str(spec), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2
+    problem = "is a folder, not a spec file" if kind == "folder" else "not a regular file (a pipe or a device?)"
+    assert result.output.strip().startswith(f"neoslam: error: {spec}: {problem}")
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_source_file_that_is_a_pipe_is_refused(tmp_path: Path) -> None:
+    os.mkfifo(tmp_path / "drive.txt")
+    message = _problem(tmp_path, "name: x\nsources: [{trajectory: drive.txt}]\n")
+    assert message == f"sources[0].trajectory: not a regular file (a pipe or a device?): {tmp_path / 'drive.txt'}"
+    os.mkfifo(tmp_path / "bag")
+    message = _problem(tmp_path, "name: x\nsources: [{dataset: bag}]\n")
+    assert message == f"sources[0].dataset: not a regular file (a pipe or a device?): {tmp_path / 'bag'}"

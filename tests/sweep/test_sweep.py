@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 import time
+from contextlib import suppress
 from pathlib import Path
 
 import pytest
@@ -24,6 +25,8 @@ from neoslam.errors import OutputError
 from neoslam.sweep import InProcess, LocalPool, RayCluster, load_spec, parse_spec, run_sweep
 from neoslam.sweep.cells import code_version
 from neoslam.sweep.runner import Task, run_task
+from neoslam.sweep.spec import KNOWN_METRICS
+from neoslam.sweep.table import flatten, split_timing
 
 SPEC = {
     "name": "tiny",
@@ -99,6 +102,14 @@ def test_pool_sweep_writes_a_row_per_cell(pooled) -> None:
 
 
 @pytest.mark.slow
+def test_the_known_metrics_are_the_numbers_a_run_measures(pooled) -> None:
+    metrics = pooled[1].records[0].metrics
+    computed, _ = split_timing(flatten(metrics))
+    numbers = {k for k, v in computed.items() if not isinstance(v, str)}  # None: a figure the drive did not support
+    assert numbers == set(KNOWN_METRICS)
+
+
+@pytest.mark.slow
 def test_ray_gives_the_same_table(pooled, spec_file: Path, tmp_path: Path, extra) -> None:
     ray = extra("ray", "cluster")
     out, _ = pooled
@@ -168,6 +179,50 @@ def test_interrupted_sweep_resumes_with_the_missing_cells(pooled, spec_file: Pat
     again = Counting()
     run_sweep(load_spec(spec_file), out, again, progress=False, environ={})
     assert again.cells == []  # nothing changed: nothing runs
+
+
+def _children(parent: int) -> list[int]:
+    """Running processes whose parent is `parent` (zombies left aside)."""
+    children = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == parent and fields[0] != "Z":
+            children.append(int(stat.parent.name))
+    return children
+
+
+def _running(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="reads the process table from /proc")
+def test_workers_end_when_the_sweep_is_killed(spec_file: Path, tmp_path: Path) -> None:
+    neoslam = Path(sys.executable).with_name("neoslam")
+    command = [str(neoslam), "sweep", str(spec_file), "--out", str(tmp_path / "out"), "--workers", "2", "--quiet"]
+    process = subprocess.Popen(command, env=_environment(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                               start_new_session=True)  # fmt: skip
+    try:
+        deadline = time.monotonic() + 120
+        while len(workers := _children(process.pid)) < 3:  # two workers and multiprocessing's resource tracker
+            assert process.poll() is None and time.monotonic() < deadline, "the workers did not start"
+            time.sleep(0.1)
+        time.sleep(1.0)  # into their cells
+        process.kill()  # SIGKILL: the sweep's process cannot end its workers itself
+        process.wait()
+        deadline = time.monotonic() + 5
+        while left := [pid for pid in workers if _running(pid)]:
+            assert time.monotonic() < deadline, f"workers left: {left}"
+            time.sleep(0.1)
+    finally:
+        with suppress(ProcessLookupError):
+            os.killpg(process.pid, signal.SIGKILL)  # whatever is left of the group, if the test failed
 
 
 @pytest.mark.slow

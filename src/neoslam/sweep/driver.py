@@ -16,7 +16,8 @@ DIR/
 ```
 
 A cell whose folder holds metrics.json under the same id (inputs, resolved config, code version, measurement) is
-not run again; a failed cell is (its error may have been the machine's).
+not run again; a failed cell is (its error may have been the machine's), and so is a cell whose files do not read
+back (cut short by a full disk, edited by hand): a line names the file, and a fresh run replaces its folder.
 """
 
 from __future__ import annotations
@@ -26,12 +27,14 @@ import hashlib
 import inspect
 import io
 import json
+import os
 import shutil
+import sys
 import tarfile
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +42,7 @@ import yaml
 
 from neoslam.errors import OutputError
 from neoslam.io.atomic import atomic_directory, atomic_file, check_target
-from neoslam.sweep.cells import Cell, Plan, axes_that_vary, expand
+from neoslam.sweep.cells import DEFAULT_MEASURE, Cell, Plan, axes_that_vary, expand
 from neoslam.sweep.executors import Executor, LocalPool
 from neoslam.sweep.runner import Measure, Outcome, Task
 from neoslam.sweep.spec import Spec
@@ -49,7 +52,9 @@ __all__ = ["CellRecord", "SweepResult", "run_sweep", "measure_name", "FORMAT", "
 
 FORMAT, VERSION = "neoslam-sweep", 1
 MARKER = "sweep.json"
-DEFAULT_MEASURE = "neoslam.commands.run.run_dataset"
+# What a sweep folder holds, each a file but `cells`: anything else under these names is refused before any work.
+OUTPUT_FILES = (MARKER, "spec.yaml", ".lock", "sweep.csv", "sweep.parquet", "timing.csv", "summary.md")
+STOPPED = "not run (the sweep was stopped)"
 
 
 @dataclass(frozen=True)
@@ -86,6 +91,7 @@ class SweepResult:
     paths: dict[str, Path]
     summary: str
     wall_s: float
+    notices: list[str] = field(default_factory=list)  # cells found unreadable, run again
 
     @property
     def failed(self) -> list[CellRecord]:
@@ -124,6 +130,20 @@ def _check_folder(out: Path, spec: Spec, inputs: list[Path]) -> None:
         raise OutputError(f"{marker}: not a sweep marker; name another folder")
     if held.get("name") != spec.name:
         raise OutputError(f"{out}: holds the sweep {held.get('name')!r}, not {spec.name!r}; name another folder")
+    _check_contents(out)
+
+
+def _check_contents(out: Path) -> None:
+    """The names a sweep writes, each what the sweep would make of it: a folder where a table goes (or a link)
+    would stop the sweep at its end, after every cell ran."""
+    for name in (*OUTPUT_FILES, "cells"):
+        path = out / name
+        if path.is_symlink():
+            raise OutputError(f"{path}: is a symbolic link, not the sweep's; move it away or name another folder")
+        if name == "cells" and path.exists() and not path.is_dir():
+            raise OutputError(f"{path}: is not a folder, so it holds no cells; move it away or name another folder")
+        if name != "cells" and path.is_dir():
+            raise OutputError(f"{path}: is a folder, not the sweep's file; move it away or name another folder")
 
 
 @contextmanager
@@ -170,19 +190,82 @@ def _store(out: Path, plan: Plan, cells: Mapping[str, Cell], outcome: Outcome) -
                 archive.extractall(staging / "results", filter="data")
 
 
-def _done(out: Path, cell: Cell) -> bool:
-    return (out / "cells" / cell.id / "metrics.json").is_file()
+class _Unreadable(Exception):
+    """A file of a cell's folder that does not read back as what the sweep wrote."""
+
+    def __init__(self, path: Path, problem: str) -> None:
+        super().__init__(f"{path}: {problem}")
 
 
-def _record(out: Path, cell: Cell) -> CellRecord:
+def _json_object(path: Path) -> dict[str, Any]:
+    try:
+        value = json.loads(path.read_bytes().decode("utf-8"))
+    except OSError as error:
+        raise _Unreadable(path, f"cannot be read ({error.strerror})") from None
+    except UnicodeDecodeError:
+        raise _Unreadable(path, "not text (not UTF-8)") from None
+    except json.JSONDecodeError as error:
+        raise _Unreadable(path, f"not valid JSON ({error.msg}, line {error.lineno} column {error.colno})") from None
+    if not isinstance(value, dict):
+        raise _Unreadable(path, f"holds a JSON {type(value).__name__}, not an object")
+    return value
+
+
+def _record(out: Path, cell: Cell) -> CellRecord | None:
+    """What the cell's folder holds (None: no cell finished there); _Unreadable when a file of it is damaged."""
     folder = out / "cells" / cell.id
-    timing = json.loads((folder / "timing.json").read_text()) if (folder / "timing.json").is_file() else {}
-    if (folder / "metrics.json").is_file():
-        return CellRecord(cell, "ok", None, json.loads((folder / "metrics.json").read_text()), timing, folder)
-    if (folder / "error.txt").is_file():
-        error = (folder / "error.txt").read_text().split("\n", 1)[0]
+    if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
+        raise _Unreadable(folder, "is not a cell folder")
+    timing = _json_object(folder / "timing.json") if (folder / "timing.json").exists() else {}
+    if (folder / "metrics.json").exists():
+        return CellRecord(cell, "ok", None, _json_object(folder / "metrics.json"), timing, folder)
+    if (folder / "error.txt").exists():
+        try:
+            error = (folder / "error.txt").read_text(errors="replace").split("\n", 1)[0]
+        except OSError as problem:
+            raise _Unreadable(folder / "error.txt", f"cannot be read ({problem.strerror})") from None
         return CellRecord(cell, "failed", error, None, timing, folder)
-    return CellRecord(cell, "failed", "not run (the sweep was stopped)", None, timing, folder)
+    return None
+
+
+def _discard(folder: Path) -> None:
+    """A damaged cell's entry that the fresh run could not replace: a link or a file where its folder goes."""
+    if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
+        folder.unlink()
+
+
+def _finished(out: Path, cells: Mapping[str, Cell], notice: Callable[[str], None]) -> tuple[dict, list[str]]:
+    """The records of the cells done under these ids (a failed one runs again), and a line for each cell whose
+    folder does not read back (it runs again too)."""
+    present = set(os.listdir(out / "cells"))
+    done: dict[str, CellRecord] = {}
+    notices = []
+    for cell_id, cell in cells.items():
+        if cell_id not in present:
+            continue
+        try:
+            record = _record(out, cell)
+        except _Unreadable as error:
+            notices.append(f"{error}; running the cell again")
+            notice(notices[-1])
+            _discard(out / "cells" / cell_id)
+            continue
+        if record is not None and record.status == "ok":
+            done[cell_id] = record
+    return done, notices
+
+
+def _fresh_record(out: Path, cell: Cell) -> CellRecord:
+    """The record of a cell this run tried: stored now, or not run if the sweep was stopped."""
+    try:
+        record = _record(out, cell)
+    except _Unreadable as error:
+        return CellRecord(cell, "failed", str(error), None, {}, out / "cells" / cell.id)
+    return record or CellRecord(cell, "failed", STOPPED, None, {}, out / "cells" / cell.id)
+
+
+def _to_stderr(message: str) -> None:
+    print(f"neoslam: {message}", file=sys.stderr, flush=True)
 
 
 def _tasks(plan: Plan, cells: list[Cell], workers: int, keep: bool, measure: Measure | None, remote: bool) -> list:
@@ -209,11 +292,13 @@ def run_sweep(
     measure: Measure | None = None,
     environ: Mapping[str, str] | None = None,
     read: list[Path] | None = None,
+    notice: Callable[[str], None] = _to_stderr,
 ) -> SweepResult:
     """Run the spec's cells that `out` does not hold yet on `executor` (default: a local pool, one worker per core),
-    then write the tables. `measure(dataset, config, out, inputs) -> metrics` replaces `neoslam run` per cell;
-    `environ`: the NEOSLAM_* variables (default the process's); `read`: further files the output must not replace
-    (the spec file)."""
+    then write the tables. `measure(dataset, config, out, inputs) -> metrics` replaces `neoslam run` per cell (the
+    spec's metrics are then its own, unchecked); `environ`: the NEOSLAM_* variables (default the process's); `read`:
+    further files the output must not replace (the spec file); `notice`: where a line goes for each cell found
+    damaged and run again (default: standard error)."""
     from tqdm import tqdm
 
     start = time.perf_counter()
@@ -224,7 +309,8 @@ def run_sweep(
     with _locked(out):
         _start_folder(out, spec)
         unique = {cell.id: cell for cell in plan.cells}
-        todo = [cell for cell in unique.values() if not _done(out, cell)]
+        held, notices = _finished(out, unique, notice)
+        todo = [cell for cell_id, cell in unique.items() if cell_id not in held]
         tasks = _tasks(plan, todo, executor.workers, spec.keep_results, measure, executor.remote)
         bar = tqdm(total=len(todo), desc=spec.name, unit="cell", disable=not progress, dynamic_ncols=True)
         failed = 0
@@ -242,11 +328,12 @@ def run_sweep(
             executor.run(tasks, done)
         finally:
             bar.close()
-        records = [_record(out, cell) for cell in plan.cells]
+        by_id = held | {cell.id: _fresh_record(out, cell) for cell in todo}
+        records = [replace(by_id[cell.id], cell=cell) for cell in plan.cells]
         columns = spec.columns or axes_that_vary(plan.cells)
         bad = sum(r.status != "ok" for r in records)
         title = f"Sweep {spec.name}: {len(records)} cells, {bad} failed"
         summary = summary_markdown(title, [r.row for r in records], columns, spec.metrics)
         paths = write_tables(out, [r.row for r in records], [r.timing_row for r in records], summary)
     return SweepResult(plan, records, len(todo), len(unique) - len(todo), paths, summary,
-                       time.perf_counter() - start)  # fmt: skip
+                       time.perf_counter() - start, notices)  # fmt: skip

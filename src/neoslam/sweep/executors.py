@@ -60,7 +60,8 @@ class InProcess(Executor):
 
 class LocalPool(Executor):
     """A pool of worker processes on this machine (spawned: no state of this process leaks into them). Workers
-    ignore Ctrl-C; when this process is interrupted it cancels what has not started and ends the workers."""
+    ignore Ctrl-C; when this process is interrupted it cancels what has not started and ends the workers, and when
+    it is killed outright they end by themselves (`worker_init`)."""
 
     name = "pool"
 
@@ -74,6 +75,7 @@ class LocalPool(Executor):
             max_workers=min(self.workers, len(tasks)),
             mp_context=multiprocessing.get_context("spawn"),
             initializer=worker_init,
+            initargs=(os.getpid(),),
         )
         finished = False
         try:

@@ -7,16 +7,21 @@ Heavy modules (torch, the pipeline) are imported inside the functions, after a w
 
 from __future__ import annotations
 
+import ctypes
 import io
 import json
 import os
 import shutil
+import signal
 import socket
+import sys
 import tarfile
 import tempfile
+import threading
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,6 +32,7 @@ from neoslam.sweep.cells import Cell, Source, code_version
 __all__ = ["Task", "Outcome", "Measure", "run_task", "run_pipeline", "single_threaded", "one_line"]
 
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+PR_SET_PDEATHSIG = 1  # prctl(2): the signal a process gets when its parent ends
 
 # measure(dataset, config, out, inputs) -> metrics (a JSON-able dict). `out` is a fresh path a measure may write its
 # results folder to (kept when the spec keeps results); `inputs` the ImageInputs of a dataset source.
@@ -64,13 +70,47 @@ def single_threaded() -> None:
     torch.set_num_threads(1)
 
 
-def worker_init() -> None:
-    """A local pool worker: Ctrl-C reaches the whole process group; the sweep's process alone handles it."""
-    import signal
-
+def worker_init(parent: int | None = None) -> None:
+    """A local pool worker: Ctrl-C reaches the whole process group; the sweep's process alone handles it. SIGTERM
+    ends the worker with its task's temporary folder; so does the end of `parent`, the sweep's process, however it
+    ended (killed with SIGKILL, it cannot end its workers itself)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _end_worker)
     for name in THREAD_VARIABLES:
         os.environ[name] = "1"
+    if parent is not None:
+        _end_with(parent)
+
+
+_working_in: list[str] = []  # the temporary folder of the task this process runs
+
+
+def _end_worker(signum: int, _frame: object) -> None:
+    for folder in _working_in:
+        shutil.rmtree(folder, ignore_errors=True)
+    os._exit(128 + signum)
+
+
+def _end_with(parent: int) -> None:
+    """SIGTERM to this process when `parent` ends: from the kernel on Linux (PR_SET_PDEATHSIG), elsewhere from a
+    thread that looks for a new parent twice a second. The kernel's signal follows the parent's thread that started
+    this process: the pool starts its workers from the thread that then waits for them."""
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            if libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0) == 0:
+                if os.getppid() != parent:  # it ended before the kernel was told
+                    os.kill(os.getpid(), signal.SIGTERM)
+                return
+        except (OSError, AttributeError):
+            pass
+    threading.Thread(target=_watch_parent, args=(parent,), name="end-with-parent", daemon=True).start()
+
+
+def _watch_parent(parent: int) -> None:
+    while os.getppid() == parent:
+        time.sleep(0.5)
+    os.kill(os.getpid(), signal.SIGTERM)
 
 
 def one_line(error: BaseException, replacements: dict[str, str] | None = None) -> str:
@@ -163,6 +203,15 @@ def _failed(cell: Cell, error: BaseException, names: dict[str, str], timing: dic
     return Outcome(cell.id, None, one_line(error, names), detail, dict(timing))
 
 
+@contextmanager
+def _working(folder: str) -> Iterator[None]:
+    _working_in.append(folder)
+    try:
+        yield
+    finally:
+        _working_in.remove(folder)
+
+
 def run_task(task: Task) -> list[Outcome]:
     """Run the task's cells; an error fails its cell (or, while making the dataset, all of them), never the task."""
     single_threaded()
@@ -177,7 +226,7 @@ def run_task(task: Task) -> list[Outcome]:
     measure = task.measure or run_pipeline
     source = task.source
     outcomes = []
-    with tempfile.TemporaryDirectory(prefix="neoslam-sweep-") as temporary:
+    with tempfile.TemporaryDirectory(prefix="neoslam-sweep-") as temporary, _working(temporary):
         folder = Path(temporary)
         names: dict[str, str] = {}
         start = time.perf_counter()

@@ -37,7 +37,17 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from neoslam.errors import ConfigError, InputError
 from neoslam.text import read_yaml
 
-__all__ = ["AXES", "DEFAULT_METRICS", "SourceSpec", "CellPick", "Spec", "SpecError", "load_spec", "data_root"]
+__all__ = [
+    "AXES",
+    "DEFAULT_METRICS",
+    "KNOWN_METRICS",
+    "SourceSpec",
+    "CellPick",
+    "Spec",
+    "SpecError",
+    "load_spec",
+    "data_root",
+]
 
 AXES = ("source", "noise", "detector", "seed", "override")
 DEFAULT_METRICS = (
@@ -48,6 +58,34 @@ DEFAULT_METRICS = (
     "loops.precision",
     "loops.recall",
 )
+
+
+def _named(prefix: str, *names: str) -> tuple[str, ...]:
+    return tuple(f"{prefix}.{name}" for name in names)
+
+
+_TRAJECTORY = ("ate_rmse_m", "ate_max_m", "rpe_translation_rmse_m", "rpe_rotation_rmse_deg",
+               "kitti_translation_percent", "kitti_rotation_deg_per_100m")  # fmt: skip
+# The numeric figures of a run's metrics.json that the table holds (`neoslam.commands.run_metrics`; its timing and
+# perception figures depend on the machine and go to timing.csv): what `metrics` may name.
+KNOWN_METRICS = (
+    "frames",
+    *_named("ate_rmse_m", "odometry", "corrected"),
+    *_named("trajectory.odometry", *_TRAJECTORY),
+    *_named("trajectory.corrected", *_TRAJECTORY),
+    *_named("loops", "accepted", "true_positive", "false_positive", "revisit_frames", "recalled_frames",
+            "precision", "recall", "f1", "recall_at_full_precision", "f1_max"),
+    "keyframes",
+    *_named("experience_map", "experiences", "links", "closures_rejected_by_grid_cells"),
+    "hebbian_bytes",
+    "objects",
+    "moving_objects",
+    "moving_observations",
+    *_named("odometry_noise", "heading_rad_per_sqrt_s", "distance_m_per_sqrt_s"),
+    *_named("cells", "grid_cells_vs_odometry_rms_m", "grid_cells_vs_odometry_final_m",
+            "head_direction_vs_odometry_rms_deg", "ovcn_epochs", "ovcn_loss_first", "ovcn_loss_last",
+            "ovcn_held_out_rmse_hz", "ovcn_held_out_max_hz"),
+)  # fmt: skip
 DATA_ENV = "NEOSLAM_DATA"
 DEFAULT_DATA = Path("../shared/data")
 
@@ -161,8 +199,11 @@ class Spec(_Strict):
     @field_validator("noise", "detectors", "seeds")
     @classmethod
     def _distinct(cls, values: list) -> list:
-        if len(set(values)) != len(values):
-            raise ValueError("each value once")
+        seen = set()
+        for value in values:
+            if value in seen:
+                raise ValueError(f"each value once ({value!r} is given twice)")
+            seen.add(value)
         return values
 
     @field_validator("overrides", mode="before")
@@ -224,8 +265,12 @@ def parse_spec(values: Any, origin: str = "sweep spec", base_dir: Path = Path(".
 
 def load_spec(path: Path) -> Spec:
     """Read and check a spec file (the per-cell checks, files and configs, come with `expand`)."""
-    if not path.is_file():
+    if not path.exists():
         raise SpecError(str(path), "", "spec file not found")
+    if path.is_dir():
+        raise SpecError(str(path), "", "is a folder, not a spec file")
+    if not path.is_file():  # a pipe would wait for a writer that may never come
+        raise SpecError(str(path), "", "not a regular file (a pipe or a device?); give a spec file")
     try:
         values = read_yaml(path)
     except InputError as error:
