@@ -49,16 +49,23 @@ LeftTopicOption = Annotated[
 RightTopicOption = Annotated[str | None, typer.Option(help="A bag's right camera topic; found when unambiguous.")]
 
 
+def _say(text: object, err: bool = False, nl: bool = True) -> None:
+    """Print a line; a file name that is not UTF-8 (kept by Python as surrogate escapes) is shown with its bytes
+    escaped (seq\\xff), where printing it as it is would fail."""
+    readable = str(text).encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    typer.echo(readable, err=err, nl=nl)
+
+
 def _fail(error: NeoSLAMError | OSError) -> None:
     # OSError: a folder that cannot be written, a disk that is full; the user can fix these too.
     message = f"{error.filename}: {error.strerror}" if isinstance(error, OSError) and error.filename else error
-    typer.echo(f"neoslam: error: {message}", err=True)
+    _say(f"neoslam: error: {message}", err=True)
     raise typer.Exit(code=2)
 
 
 def _version(value: bool) -> None:
     if value:
-        typer.echo(f"neoslam {__version__}")
+        _say(f"neoslam {__version__}")
         raise typer.Exit()
 
 
@@ -108,7 +115,7 @@ def simulate(
     except (NeoSLAMError, OSError) as error:
         _fail(error)
     detections = sum(len(d) for d in recording.detections)
-    typer.echo(f"wrote {out}: {len(recording.truth)} frames, {detections} detections, {len(recording.world)} objects")
+    _say(f"wrote {out}: {len(recording.truth)} frames, {detections} detections, {len(recording.world)} objects")
 
 
 @app.command("run")
@@ -193,7 +200,7 @@ def run_command(
         if session["id"] > 1:
             rows += [("relocalised at frame", "never" if relocalised is None else relocalised)]
             rows += [("closures with the stored map", session["map_closures"])]
-    typer.echo(_table(rows))
+    _say(_table(rows))
 
 
 @app.command()
@@ -220,7 +227,7 @@ def detect(
         )
     except (NeoSLAMError, OSError) as error:
         _fail(error)
-    typer.echo(f"wrote {out}: {counts['detections']} detections in {counts['frames']} frames")
+    _say(f"wrote {out}: {counts['detections']} detections in {counts['frames']} frames")
 
 
 @app.command()
@@ -252,14 +259,14 @@ def evaluate(
         _fail(error)
     rows = [(key, value) for key, value in metrics.items() if not isinstance(value, dict)]
     rows += [(f"loops {key}", value) for key, value in metrics.get("loops", {}).items()]
-    typer.echo(_table(rows))
+    _say(_table(rows))
 
 
 @app.command("dump-config")
 def dump_config_command(config: ConfigOption = None) -> None:
     """Print the resolved configuration (defaults, then --config, then NEOSLAM_* variables) as YAML."""
     try:
-        typer.echo(dump_config(load_config(config)), nl=False)
+        _say(dump_config(load_config(config)), nl=False)
     except (NeoSLAMError, OSError) as error:
         _fail(error)
 
@@ -302,14 +309,14 @@ def sweep(
             result = run_sweep(loaded, out, make_executor(ray, workers), progress=not quiet, read=[spec])
     except (NeoSLAMError, OSError) as error:
         _fail(error)
-    typer.echo(result.summary)
+    _say(result.summary)
     failed = len({r.cell.id for r in result.failed})
-    typer.echo(
+    _say(
         f"wrote {out}: {len(result.records)} cells ({result.ran} run, {result.reused} reused, {failed} failed) "
         f"in {result.wall_s:.1f} s; table {result.paths['csv'].name}, {result.paths['parquet'].name}"
     )
     if failed:
-        typer.echo(f"neoslam: {failed} cells failed (their errors: the error column of {result.paths['csv']})",
+        _say(f"neoslam: {failed} cells failed (their errors: the error column of {result.paths['csv']})",
                    err=True)  # fmt: skip
         raise typer.Exit(code=1)
 

@@ -19,7 +19,7 @@ from neoslam.inputs import MAX_CONFIG_BYTES, MAX_TEXT_BYTES, read_input_bytes
 __all__ = ["YamlLoader", "load_yaml", "read_text", "read_yaml"]
 
 
-class YamlLoader(yaml.SafeLoader):
+class YamlLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # libyaml's parser where PyYAML has it
     """PyYAML's safe loader with YAML 1.2's booleans: only true and false. YAML 1.1 also reads on, off, yes and no
     as booleans, so `synchronous: off` would become False instead of the setting's value "off"."""
 
@@ -60,6 +60,8 @@ def read_yaml(path: Path, missing: str = "file not found", limit: int = MAX_CONF
     try:
         return load_yaml(text)
     except yaml.YAMLError as error:
+        if "nesting depth" in str(getattr(error, "problem", "")):  # libyaml's own limit
+            raise InputError(path, "not valid YAML (nested too deeply)") from None
         mark = getattr(error, "problem_mark", None)
         line = mark.line + 1 if mark is not None else None
         raise InputError(path, f"not valid YAML ({error.__class__.__name__})", line=line) from None

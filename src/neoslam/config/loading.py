@@ -82,9 +82,7 @@ def _variable_for(location: tuple[Any, ...], environ: dict[str, str]) -> str:
 
 def _read_yaml_mapping(path: Path) -> dict[str, Any]:
     """A config file's sections: one error naming the file (and the line, where YAML knows it) otherwise."""
-    if not path.is_file():
-        raise InputError(path, "config file not found")
-    loaded = read_yaml(path) or {}
+    loaded = read_yaml(path, missing="config file not found") or {}
     if not isinstance(loaded, dict):
         raise InputError(path, "a config file must hold a mapping of sections")
     return loaded

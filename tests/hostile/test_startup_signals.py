@@ -1,0 +1,47 @@
+"""Ctrl-C, SIGTERM or SIGHUP at a random moment of a run's first seconds, while Python imports torch, GTSAM and
+onnxruntime: always one line and 128 + the signal's number, and nothing left behind.
+
+A stop that raised an exception into those imports turned into an ImportError, an abort in pybind11 or a
+traceback; the console script's handler (neoslam.stopping) exits without raising, from its first line. The
+moments are drawn with a fixed seed, so that a failure is repeatable.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.slow
+
+REPETITIONS = 8  # per signal; the moments spread over the start-up
+EARLIEST_S, LATEST_S = 0.05, 3.0  # after Python's own start-up (tens of ms), through the heavy imports and into the run
+STOP_WITHIN_S = 10
+
+
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+def test_a_signal_at_any_moment_of_start_up_is_one_line_and_128_plus_n(tmp_path: Path, stop: signal.Signals) -> None:
+    moments = random.Random(f"start-up {stop.name}").sample(
+        range(int(EARLIEST_S * 100), int(LATEST_S * 100)), REPETITIONS
+    )
+    expected = "interrupted" if stop == signal.SIGINT else f"stopped by {stop.name}"
+    for moment in sorted(m / 100 for m in moments):
+        folder = tmp_path / f"at-{moment:.2f}"
+        folder.mkdir()
+        command = [sys.executable, "-m", "neoslam", "run", "--out", "results", "-q"]
+        process = subprocess.Popen(command, cwd=folder, stderr=subprocess.PIPE, text=True, env=os.environ.copy())
+        try:
+            time.sleep(moment)
+            process.send_signal(stop)
+            _, stderr = process.communicate(timeout=STOP_WITHIN_S)
+        finally:
+            process.kill()
+        assert process.returncode == 128 + stop, (moment, process.returncode, stderr)
+        assert stderr.splitlines() == [f"neoslam: {expected}; no output written"], (moment, stderr)
+        assert list(folder.iterdir()) == [], (moment, list(folder.iterdir()))
