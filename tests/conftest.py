@@ -27,6 +27,16 @@ T = TypeVar("T")
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    # The networks the tests train are tiny (the object-vector cells: one hidden layer of 32 units, batches of 32),
+    # where torch's worker threads only add synchronisation; on a 2-core machine that is busy with other work they
+    # spin against each other instead (the 400-epoch fit of tests/cells/test_object_vector.py, measured under load:
+    # 4.5 s on one thread, 60-120 s on two). The results are the same either way.
+    import torch
+
+    torch.set_num_threads(1)
+
+
 def _data_root() -> Path:
     return Path(os.environ.get("NEOSLAM_DATA", REPO_ROOT.parent / "shared" / "data")).resolve()
 
