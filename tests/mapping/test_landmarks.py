@@ -123,6 +123,7 @@ def test_landmarks_pull_drifting_odometry_back(biased_square, clean):
     assert len(solver.landmarks) == len(object_positions(biased_square))
 
 
+@pytest.mark.slow
 def test_a_wrong_association_is_down_weighted(biased_square, config, clean):
     """One view of an object placed 3 m off (another object's place): the robust kernel keeps the map."""
     wrong = drive(biased_square, config, wrong=(50, 3, np.array([3.0, 0.0, 0.0])))[0]

@@ -78,6 +78,7 @@ def block_run(cli, rerun_module, tmp_path_factory: pytest.TempPathFactory) -> tu
     return root / "out", metrics, Recording(root / "out" / "block.rrd")
 
 
+@pytest.mark.slow
 def test_every_frame_is_logged_on_both_timelines(block_run) -> None:
     _, metrics, recording = block_run
     assert metrics["frames"] == BLOCK_FRAMES and metrics["loops"]["accepted"] > 0
@@ -88,6 +89,7 @@ def test_every_frame_is_logged_on_both_timelines(block_run) -> None:
     assert "camera/image" not in recording.rows  # a simulated dataset has no images
 
 
+@pytest.mark.slow
 def test_the_map_layers_end_with_the_final_map(block_run) -> None:
     out, metrics, recording = block_run
     for entity in (*MAP_LAYERS, "world/loop_closures"):
@@ -103,6 +105,7 @@ def test_the_map_layers_end_with_the_final_map(block_run) -> None:
     assert last["metrics/loop_closures"]["Scalars:scalars"] == [metrics["loops"]["accepted"]]
 
 
+@pytest.mark.slow
 def test_the_results_folder_holds_the_pose_graph(block_run) -> None:
     out, metrics, _ = block_run
     lines = (out / "experience_map.g2o").read_text().splitlines()
@@ -110,6 +113,7 @@ def test_the_results_folder_holds_the_pose_graph(block_run) -> None:
     assert sum(line.startswith("EDGE_SE3:QUAT ") for line in lines) == metrics["experience_map"]["links"]
 
 
+@pytest.mark.slow
 def test_an_image_sequence_logs_its_left_images(cli, rerun_module, shared_data: Path, tmp_path: Path) -> None:
     model = shared_data / "models" / "yolox_nano_coco" / "yolox_nano.onnx"
     env = {"NEOSLAM_PERCEPTION__DETECTOR__MODEL": str(model)}
@@ -123,6 +127,7 @@ def test_an_image_sequence_logs_its_left_images(cli, rerun_module, shared_data: 
     assert all(label.split()[0] in ("car", "truck", "bicycle", "person") for label in labels)
 
 
+@pytest.mark.slow
 def test_a_bare_rerun_spawns_the_viewer(cli, rerun_module, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     spawned = []
     monkeypatch.setattr(rerun_module.RecordingStream, "spawn", lambda self, **kwargs: spawned.append(kwargs))
