@@ -1,9 +1,10 @@
 """Reading stereo frames from ROS bags against reading them from the KITTI folder.
 
 The 51 frames of kitti_06_51 are written as a ROS 1 bag and as ROS 2 bags (sqlite3 and mcap; mono8 Images, and
-one with the right camera's PNG files as CompressedImage) with the tests' writer (tests/bags/conftest.py). For each
-input: the time to open it (for a bag: index every stamp and decode the first pair), the median time to read one
-stereo pair (several passes, the first a warm-up), its size, and whether every pixel equals the KITTI folder's.
+one with the right camera's PNG files as CompressedImage) with the tests' writer
+(tests/datasets/bags/conftest.py). For each input: the time to open it (for a bag: index every stamp and decode the
+first pair), the median time to read one stereo pair (several passes, the first a warm-up), its size, and whether
+every pixel equals the KITTI folder's.
 
     python benchmarks/bag_read.py [--quick] [--json FILE]
 """
@@ -35,7 +36,9 @@ BAGS = {  # name: (file or folder name, kind, right camera as CompressedImage)
 
 def _bag_writer():
     """The tests' bag writer (rosbags' ROS 1 and ROS 2 writers), loaded from its file."""
-    spec = importlib.util.spec_from_file_location("bag_writer", REPO_ROOT / "tests" / "bags" / "conftest.py")
+    spec = importlib.util.spec_from_file_location(
+        "bag_writer", REPO_ROOT / "tests" / "datasets" / "bags" / "conftest.py"
+    )
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module.write_stereo_bag

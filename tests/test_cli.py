@@ -14,8 +14,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cli_runner import invoke as _invoke
-from cli_runner import ok as _ok
 from neoslam import __version__
 from neoslam.config import NeoSLAMConfig, load_config
 
@@ -56,12 +54,12 @@ def _evo_ape(reference: Path, estimate: Path) -> float:
 
 
 @pytest.fixture(scope="module")
-def workspace(tmp_path_factory: pytest.TempPathFactory, kitti_poses: Callable[[str], Path]) -> Path:
+def workspace(cli, tmp_path_factory: pytest.TempPathFactory, kitti_poses: Callable[[str], Path]) -> Path:
     """The first 300 poses of KITTI 05, simulated with vo noise, run with and without the dataset's truth/."""
     root = tmp_path_factory.mktemp("cli")
     lines = kitti_poses("05").read_text().splitlines(keepends=True)[:FRAMES]
     (root / "kitti05.txt").write_text("".join(lines))
-    simulated = _ok(
+    simulated = cli.ok(
         "simulate",
         "--trajectory",
         root / "kitti05.txt",
@@ -76,37 +74,37 @@ def workspace(tmp_path_factory: pytest.TempPathFactory, kitti_poses: Callable[[s
         "-q",
     )
     (root / "simulate_stdout.txt").write_text(simulated.stdout)
-    _ok("run", root / "data", "--out", root / "results", "-q")
+    cli.ok("run", root / "data", "--out", root / "results", "-q")
     shutil.copytree(root / "data", root / "data_no_truth")
     shutil.rmtree(root / "data_no_truth" / "truth")
-    _ok("run", root / "data_no_truth", "--out", root / "results_no_truth", "-q")
+    cli.ok("run", root / "data_no_truth", "--out", root / "results_no_truth", "-q")
     return root
 
 
-def test_version_in_a_real_process() -> None:
+def test_version_in_a_real_process(cli) -> None:
     done = subprocess.run([_executable(), "--version"], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout == f"neoslam {__version__}\n"
-    assert _ok("--version").stdout == f"neoslam {__version__}\n"
+    assert cli.ok("--version").stdout == f"neoslam {__version__}\n"
 
 
-def test_no_arguments_shows_help() -> None:
-    result = _invoke()
+def test_no_arguments_shows_help(cli) -> None:
+    result = cli.invoke()
     assert "simulate" in result.output and "run" in result.output and "evaluate" in result.output
 
 
-def test_dump_config_loads_back(tmp_path: Path) -> None:
-    result = _ok("dump-config")
+def test_dump_config_loads_back(cli, tmp_path: Path) -> None:
+    result = cli.ok("dump-config")
     path = tmp_path / "dumped.yaml"
     path.write_text(result.stdout)
     assert load_config(path, environ={}) == load_config(environ={})
 
 
-def test_dump_config_with_file_and_environment(tmp_path: Path) -> None:
+def test_dump_config_with_file_and_environment(cli, tmp_path: Path) -> None:
     path = tmp_path / "mine.yaml"
     path.write_text("keyframes:\n  e_max: 2.0\nmatching:\n  min_inliers: 4\n")
     env = {"NEOSLAM_MATCHING__MIN_INLIERS": "6", "NEOSLAM_DATA": "/nowhere"}
-    result = _ok("dump-config", "--config", path, env=env)
+    result = cli.ok("dump-config", "--config", path, env=env)
     (tmp_path / "dumped.yaml").write_text(result.stdout)
     dumped = load_config(tmp_path / "dumped.yaml", environ={})
     assert dumped.keyframes.e_max == 2.0
@@ -185,26 +183,26 @@ def test_run_without_truth_gives_the_same_map(workspace: Path) -> None:
 
 
 @pytest.mark.slow
-def test_existing_out_is_refused_unless_overwrite(workspace: Path, tmp_path: Path) -> None:
+def test_existing_out_is_refused_unless_overwrite(cli, workspace: Path, tmp_path: Path) -> None:
     out = tmp_path / "out"
     out.mkdir()
     (out / "keep.txt").write_text("mine")
-    result = _invoke("run", workspace / "data", "--out", out, "-q")
+    result = cli.invoke("run", workspace / "data", "--out", out, "-q")
     assert result.exit_code == 2
     assert result.stderr.count("\n") == 1 and str(out) in result.stderr and "--overwrite" in result.stderr
     assert (out / "keep.txt").read_text() == "mine"
-    result = _invoke("simulate", "--route", "block", "--out", out, "-q")
+    result = cli.invoke("simulate", "--route", "block", "--out", out, "-q")
     assert result.exit_code == 2 and (out / "keep.txt").exists()
-    _ok("run", workspace / "data", "--out", out, "--overwrite", "-q")
+    cli.ok("run", workspace / "data", "--out", out, "--overwrite", "-q")
     assert not (out / "keep.txt").exists()
     for name in SAME_WITHOUT_TRUTH:
         assert (out / name).read_bytes() == (workspace / "results" / name).read_bytes(), name
 
 
-def test_evaluate_prints_the_ate(workspace: Path, tmp_path: Path) -> None:
+def test_evaluate_prints_the_ate(cli, workspace: Path, tmp_path: Path) -> None:
     results = workspace / "results"
     metrics = json.loads((results / "metrics.json").read_text())
-    result = _ok(
+    result = cli.ok(
         "evaluate", results / "odometry_tum.txt", results / "groundtruth_tum.txt", "--json", tmp_path / "m.json"
     )
     rows = dict(line.split(None, 1) for line in result.stdout.splitlines())
@@ -212,10 +210,10 @@ def test_evaluate_prints_the_ate(workspace: Path, tmp_path: Path) -> None:
     assert int(rows["matched_poses"]) == FRAMES
     assert json.loads((tmp_path / "m.json").read_text())["ate_rmse_m"] == float(rows["ate_rmse_m"])
     # the KITTI twins give the same ATE (timestamps from the frame period)
-    result = _ok("evaluate", results / "odometry_kitti.txt", results / "groundtruth_kitti.txt")
+    result = cli.ok("evaluate", results / "odometry_kitti.txt", results / "groundtruth_kitti.txt")
     rows = dict(line.split(None, 1) for line in result.stdout.splitlines())
     assert float(rows["ate_rmse_m"]) == pytest.approx(metrics["ate_rmse_m"]["odometry"], rel=1e-4)
-    result = _ok(
+    result = cli.ok(
         "evaluate",
         results / "trajectory_tum.txt",
         results / "groundtruth_tum.txt",
@@ -304,10 +302,10 @@ def _assert_one_line_error(result, expected: list[str]) -> None:
 
 
 @pytest.mark.parametrize("case", sorted(BAD_INPUTS))
-def test_bad_input_is_one_line_and_exit_2(case: str, bad_inputs: Path) -> None:
+def test_bad_input_is_one_line_and_exit_2(cli, case: str, bad_inputs: Path) -> None:
     args, expected = BAD_INPUTS[case]
     quiet = ["-q"] if args[0] in ("simulate", "run") else []
-    result = _invoke(*(arg.format(d=bad_inputs) for arg in args), *quiet)
+    result = cli.invoke(*(arg.format(d=bad_inputs) for arg in args), *quiet)
     _assert_one_line_error(result, [part.format(d=bad_inputs) for part in expected])
     assert not (bad_inputs / "o").exists()
     assert not [p for p in bad_inputs.iterdir() if "partial" in p.name]
@@ -343,31 +341,33 @@ XFAIL_CASES = {
     "case",
     [pytest.param(name) for name, (reason, _) in XFAIL_CASES.items()],
 )
-def test_degenerate_trajectory_is_a_clean_error(case: str, tmp_path: Path) -> None:
+def test_degenerate_trajectory_is_a_clean_error(cli, case: str, tmp_path: Path) -> None:
     (tmp_path / "poses.txt").write_text(XFAIL_CASES[case][1])
-    result = _invoke("simulate", "--trajectory", tmp_path / "poses.txt", "--out", tmp_path / "o", "-q")
+    result = cli.invoke("simulate", "--trajectory", tmp_path / "poses.txt", "--out", tmp_path / "o", "-q")
     if result.exit_code == 0:  # a clean success is fine too
         return
     _assert_one_line_error(result, ["poses.txt"])
 
 
-def test_bad_environment_value_is_one_line() -> None:
-    result = _invoke("dump-config", env={"NEOSLAM_MATCHING__MIN_INLIERS": "["})
+def test_bad_environment_value_is_one_line(cli) -> None:
+    result = cli.invoke("dump-config", env={"NEOSLAM_MATCHING__MIN_INLIERS": "["})
     _assert_one_line_error(result, ["NEOSLAM_MATCHING__MIN_INLIERS"])
 
 
-def test_both_trajectory_and_route_is_refused(bad_inputs: Path) -> None:
-    result = _invoke("simulate", "--trajectory", bad_inputs / "ok.txt", "--route", "block", "--out", bad_inputs / "o")
+def test_both_trajectory_and_route_is_refused(cli, bad_inputs: Path) -> None:
+    result = cli.invoke(
+        "simulate", "--trajectory", bad_inputs / "ok.txt", "--route", "block", "--out", bad_inputs / "o"
+    )
     assert result.exit_code == 2
     assert "Traceback" not in result.output
     assert "either --trajectory or --route" in result.output
     assert not (bad_inputs / "o").exists()
 
 
-def test_evaluate_a_short_trajectory(tmp_path: Path) -> None:
+def test_evaluate_a_short_trajectory(cli, tmp_path: Path) -> None:
     path = tmp_path / "short.txt"
     path.write_text("".join(f"{0.1 * k:.1f} {k} 0 0 0 0 0 1\n" for k in range(50)))  # 49 m
-    result = _invoke("evaluate", path, path)
+    result = cli.invoke("evaluate", path, path)
     assert result.exit_code in (0, 2), result.exception
     assert "Traceback" not in result.output
 
@@ -379,7 +379,7 @@ BLOCK_FRAMES = 600  # the block route up to its first revisit of the start: a fe
 
 
 @pytest.fixture(scope="module")
-def block_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+def block_runs(cli, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """The simulated block route (vo noise, the ideal detection profile: a rich street that closes loops), run with
     `--backend relaxation` and with `--backend pose-graph`."""
     from neoslam.io.trajectory_files import write_tum
@@ -390,11 +390,11 @@ def block_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     truth = drive_route(ROUTES["block"], sim.frame_period, sim.camera.height_above_ground)
     write_tum(root / "block.txt", truth.subset(np.arange(BLOCK_FRAMES)))
     simulate = ["simulate", "--trajectory", root / "block.txt", "--noise", "vo", "--detector", "ideal", "--seed", 2]
-    _ok(*simulate, "--out", root / "data", "-q")
+    cli.ok(*simulate, "--out", root / "data", "-q")
     outs = {}
     for backend in ("relaxation", "pose-graph"):
         outs[backend] = root / backend
-        _ok("run", root / "data", "--backend", backend, "--out", outs[backend], "-q")
+        cli.ok("run", root / "data", "--backend", backend, "--out", outs[backend], "-q")
     return outs
 
 
@@ -503,9 +503,9 @@ def test_closure_plots_exist_when_closures_exist(block_runs: dict[str, Path], ba
         assert (out / "plots" / name).stat().st_size > 1000, name
 
 
-def test_unknown_backend_is_one_line_and_exit_2(tmp_path: Path) -> None:
+def test_unknown_backend_is_one_line_and_exit_2(cli, tmp_path: Path) -> None:
     (tmp_path / "empty").mkdir()
-    result = _invoke("run", tmp_path / "empty", "--backend", "gtsam2", "--out", tmp_path / "o", "-q")
+    result = cli.invoke("run", tmp_path / "empty", "--backend", "gtsam2", "--out", tmp_path / "o", "-q")
     _assert_one_line_error(result, ["backend", "gtsam2", "relaxation", "pose-graph"])
     assert not (tmp_path / "o").exists()
     assert not [p for p in tmp_path.iterdir() if "partial" in p.name]
@@ -515,11 +515,11 @@ def test_unknown_backend_is_one_line_and_exit_2(tmp_path: Path) -> None:
 
 
 @pytest.fixture(scope="module")
-def image_run(tmp_path_factory: pytest.TempPathFactory, shared_data: Path) -> Path:
+def image_run(cli, tmp_path_factory: pytest.TempPathFactory, shared_data: Path) -> Path:
     out = tmp_path_factory.mktemp("images") / "mini"
     model = shared_data / "models" / "yolox_nano_coco" / "yolox_nano.onnx"
     env = {"NEOSLAM_PERCEPTION__DETECTOR__MODEL": str(model)}
-    _ok("run", shared_data / "kitti_mini", "--sequence", "06", "--out", out, "-q", env=env)
+    cli.ok("run", shared_data / "kitti_mini", "--sequence", "06", "--out", out, "-q", env=env)
     return out
 
 
@@ -537,7 +537,7 @@ def test_run_on_kitti_images_writes_the_results_folder(image_run: Path) -> None:
 
 
 def test_run_on_kitti_images_with_detections_and_odometry_files(
-    image_run: Path, shared_data: Path, tmp_path: Path
+    cli, image_run: Path, shared_data: Path, tmp_path: Path
 ) -> None:
     detections = tmp_path / "detections.jsonl"
     box = [712.0, 170.0, 842.0, 252.0]
@@ -546,7 +546,7 @@ def test_run_on_kitti_images_with_detections_and_odometry_files(
     odometry = image_run / "groundtruth_kitti.txt"
     out = tmp_path / "files"
     root = shared_data / "kitti_mini"
-    _ok("run", root, "--sequence", "06", "--detections", detections, "--odometry", odometry, "--out", out, "-q")
+    cli.ok("run", root, "--sequence", "06", "--detections", detections, "--odometry", odometry, "--out", out, "-q")
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["ate_rmse_m"]["odometry"] < 1e-3  # the ground truth given as odometry comes back
 
@@ -560,22 +560,24 @@ def test_run_on_kitti_images_with_detections_and_odometry_files(
         (["--sequence", "06", "--odometry", "{t}/missing.txt", "--out", "{o}"], ["missing.txt", "not found"]),
     ],
 )
-def test_bad_image_inputs_are_one_line(args: list[str], expected: list[str], shared_data: Path, tmp_path: Path) -> None:
+def test_bad_image_inputs_are_one_line(
+    cli, args: list[str], expected: list[str], shared_data: Path, tmp_path: Path
+) -> None:
     out = tmp_path / "o"
     fill = {"o": out, "t": tmp_path}
-    result = _invoke("run", shared_data / "kitti_mini", *(a.format(**fill) for a in args), "-q")
+    result = cli.invoke("run", shared_data / "kitti_mini", *(a.format(**fill) for a in args), "-q")
     _assert_one_line_error(result, [e.format(**fill) for e in expected])
     assert not out.exists()
 
 
-def test_missing_detector_model_is_one_line(shared_data: Path, tmp_path: Path) -> None:
+def test_missing_detector_model_is_one_line(cli, shared_data: Path, tmp_path: Path) -> None:
     env = {"NEOSLAM_PERCEPTION__DETECTOR__MODEL": str(tmp_path / "nowhere.onnx")}
-    result = _invoke("run", shared_data / "kitti_mini", "--sequence", "06", "--out", tmp_path / "o", "-q", env=env)
+    result = cli.invoke("run", shared_data / "kitti_mini", "--sequence", "06", "--out", tmp_path / "o", "-q", env=env)
     _assert_one_line_error(result, ["nowhere.onnx", "YOLOX-ONNX-TFLite-Sample"])
 
 
-def test_image_options_need_a_kitti_root(workspace: Path, tmp_path: Path) -> None:
-    result = _invoke("run", workspace / "data", "--sequence", "06", "--out", tmp_path / "o", "-q")
+def test_image_options_need_a_kitti_root(cli, workspace: Path, tmp_path: Path) -> None:
+    result = cli.invoke("run", workspace / "data", "--sequence", "06", "--out", tmp_path / "o", "-q")
     _assert_one_line_error(result, ["--sequence", "KITTI image sequences only"])
 
 
@@ -583,32 +585,32 @@ def test_image_options_need_a_kitti_root(workspace: Path, tmp_path: Path) -> Non
 
 
 @pytest.mark.slow
-def test_detect_writes_what_run_reads(shared_data: Path, tmp_path: Path) -> None:
+def test_detect_writes_what_run_reads(cli, shared_data: Path, tmp_path: Path) -> None:
     """`neoslam detect` runs the detector once; `run --detections` on its file maps what a run with the detector
     maps (same detections, so the same objects)."""
     root = shared_data / "kitti_mini"
     dets = tmp_path / "dets.jsonl"
-    result = _ok("detect", root, "--sequence", "06", "--out", dets, "-q")
+    result = cli.ok("detect", root, "--sequence", "06", "--out", dets, "-q")
     assert f"wrote {dets}" in result.stdout
     lines = [json.loads(line) for line in dets.read_text().splitlines()]
     assert [line["frame"] for line in lines] == list(range(12))
     assert sum(len(line["detections"]) for line in lines) >= 12
-    _ok("run", root, "--sequence", "06", "--out", tmp_path / "with_file", "--detections", dets, "-q")
-    _ok("run", root, "--sequence", "06", "--out", tmp_path / "with_detector", "-q")
+    cli.ok("run", root, "--sequence", "06", "--out", tmp_path / "with_file", "--detections", dets, "-q")
+    cli.ok("run", root, "--sequence", "06", "--out", tmp_path / "with_detector", "-q")
     objects = [(tmp_path / name / "objects.csv").read_text() for name in ("with_file", "with_detector")]
     assert objects[0] == objects[1]
 
 
-def test_detect_refuses_an_existing_file_and_bad_roots(shared_data: Path, tmp_path: Path) -> None:
+def test_detect_refuses_an_existing_file_and_bad_roots(cli, shared_data: Path, tmp_path: Path) -> None:
     existing = tmp_path / "mine.jsonl"
     existing.write_text("keep me\n")
-    result = _invoke("detect", shared_data / "kitti_mini", "--sequence", "06", "--out", existing, "-q")
+    result = cli.invoke("detect", shared_data / "kitti_mini", "--sequence", "06", "--out", existing, "-q")
     _assert_one_line_error(result, ["mine.jsonl", "exists", "--overwrite"])
     assert existing.read_text() == "keep me\n"
-    result = _invoke("detect", shared_data / "kitti_mini", "--out", tmp_path / "d.jsonl", "-q")
+    result = cli.invoke("detect", shared_data / "kitti_mini", "--out", tmp_path / "d.jsonl", "-q")
     _assert_one_line_error(result, ["--sequence", "sequences here: 06"])
     not_kitti = tmp_path / "not-kitti"
     not_kitti.mkdir()
-    result = _invoke("detect", not_kitti, "--sequence", "06", "--out", tmp_path / "d.jsonl", "-q")
+    result = cli.invoke("detect", not_kitti, "--sequence", "06", "--out", tmp_path / "d.jsonl", "-q")
     _assert_one_line_error(result, [str(not_kitti), "not a KITTI odometry root"])
     assert not (tmp_path / "d.jsonl").exists() and not [p for p in tmp_path.iterdir() if "partial" in p.name]

@@ -15,9 +15,6 @@ import numpy as np
 import pytest
 import yaml
 
-from cli_runner import invoke as _invoke
-from cli_runner import one_line_error as _one_line_error
-
 SMALL_FRAMES = 40  # a cut of the block route: enough to run end to end in a few seconds
 BOM = b"\xef\xbb\xbf"
 # KITTI 06's rectified projections (calib.txt), for a synthetic three-frame KITTI root.
@@ -60,10 +57,10 @@ def _cut(source: Path, target: Path, frames: int) -> None:
 
 
 @pytest.fixture(scope="module")
-def small(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def small(cli, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """`neoslam simulate --route block`, cut to SMALL_FRAMES frames."""
     root = tmp_path_factory.mktemp("hostile")
-    _ok(_invoke("simulate", "--route", "block", "--out", root / "block", "-q"))
+    _ok(cli.invoke("simulate", "--route", "block", "--out", root / "block", "-q"))
     _cut(root / "block", root / "small", SMALL_FRAMES)
     return root / "small"
 
@@ -121,10 +118,10 @@ def kitti_odometry(root: Path) -> Path:
     return root / "odometry.txt"
 
 
-def _run_kitti(root: Path, out: Path, detections: Path | None = None, odometry: Path | None = None):
+def _run_kitti(cli, root: Path, out: Path, detections: Path | None = None, odometry: Path | None = None):
     detections = detections or root / "empty.jsonl"
     odometry = odometry or root / "poses" / "06.txt"
-    return _invoke(
+    return cli.invoke(
         "run", root, "--sequence", "06", "--detections", detections, "--odometry", odometry, "--out", out, "-q"
     )
 
@@ -142,28 +139,28 @@ def _run_kitti(root: Path, out: Path, detections: Path | None = None, odometry: 
     ],
 )
 @pytest.mark.slow
-def test_impossible_velocity_in_frames_csv_is_refused(dataset: Path, column: str, value: str, expected: list[str]):
+def test_impossible_velocity_in_frames_csv_is_refused(cli, dataset: Path, column: str, value: str, expected: list[str]):
     _set_cell(dataset / "frames.csv", 3, column, value)
-    _one_line_error(_invoke("run", dataset, "--out", dataset.parent / "o", "-q"), *expected)
+    cli.one_line_error(cli.invoke("run", dataset, "--out", dataset.parent / "o", "-q"), *expected)
     assert not (dataset.parent / "o").exists()
 
 
-def test_a_timestamp_gap_of_1e7_s_is_refused(dataset: Path):
+def test_a_timestamp_gap_of_1e7_s_is_refused(cli, dataset: Path):
     rows = _rows(dataset / "frames.csv")
     for row in rows[7:]:
         row[1] = f"{float(row[1]) + 1e7:.6f}"
     _write_rows(dataset / "frames.csv", rows)
-    result = _invoke("run", dataset, "--out", dataset.parent / "o", "-q")
-    _one_line_error(result, "frames.csv:8", "time step of 1e+07 s", "motion_limits.max_time_step")
+    result = cli.invoke("run", dataset, "--out", dataset.parent / "o", "-q")
+    cli.one_line_error(result, "frames.csv:8", "time step of 1e+07 s", "motion_limits.max_time_step")
 
 
-def test_motion_limits_are_configurable(dataset: Path, tmp_path: Path):
+def test_motion_limits_are_configurable(cli, dataset: Path, tmp_path: Path):
     (tmp_path / "slow.yaml").write_text("motion_limits:\n  max_speed: 1.0\n")
-    result = _invoke("run", dataset, "--config", tmp_path / "slow.yaml", "--out", tmp_path / "o", "-q")
-    _one_line_error(result, "frames.csv:", "motion_limits.max_speed (1 m/s)")
+    result = cli.invoke("run", dataset, "--config", tmp_path / "slow.yaml", "--out", tmp_path / "o", "-q")
+    cli.one_line_error(result, "frames.csv:", "motion_limits.max_speed (1 m/s)")
 
 
-def test_the_largest_allowed_step_runs_quickly(dataset: Path, tmp_path: Path):
+def test_the_largest_allowed_step_runs_quickly(cli, dataset: Path, tmp_path: Path):
     """With the limits at their largest (1000 m/s for a day), one frame jumps 8.6e7 m: ten million grid cells.
     The cells shift by that modulo the torus, so the run takes as long as any other (it hung before)."""
     limits = "motion_limits:\n  max_speed: 1000\n  max_time_step: 86400\n"
@@ -173,7 +170,7 @@ def test_the_largest_allowed_step_runs_quickly(dataset: Path, tmp_path: Path):
     for row in rows[11:]:
         row[1] = f"{float(row[1]) + 86399:.6f}"
     _write_rows(dataset / "frames.csv", rows)
-    result = _invoke("run", dataset, "--config", tmp_path / "loose.yaml", "--out", tmp_path / "o", "-q")
+    result = cli.invoke("run", dataset, "--config", tmp_path / "loose.yaml", "--out", tmp_path / "o", "-q")
     _ok(result)
     metrics = json.loads((tmp_path / "o" / "metrics.json").read_text())
     assert metrics["timing"]["ms_per_frame_p95"] < 1000
@@ -187,7 +184,7 @@ def test_the_largest_allowed_step_runs_quickly(dataset: Path, tmp_path: Path):
         ("half turn", ["odometry.txt:3", "rotation rate 31.4159 rad/s", "motion_limits.max_turn_rate"]),
     ],
 )
-def test_impossible_motion_in_an_odometry_file_is_refused(kitti: Path, change: str, expected: list[str]):
+def test_impossible_motion_in_an_odometry_file_is_refused(cli, kitti: Path, change: str, expected: list[str]):
     lines = (kitti / "poses" / "06.txt").read_text().splitlines()
     values = lines[2].split()
     if change == "x 1e300":
@@ -198,8 +195,8 @@ def test_impossible_motion_in_an_odometry_file_is_refused(kitti: Path, change: s
         values[0], values[10] = "-1", "-1"
     lines[2] = " ".join(values)
     (kitti / "odometry.txt").write_text("\n".join(lines) + "\n")
-    result = _run_kitti(kitti, kitti.parent / "o", odometry=kitti / "odometry.txt")
-    _one_line_error(result, *expected)
+    result = _run_kitti(cli, kitti, kitti.parent / "o", odometry=kitti / "odometry.txt")
+    cli.one_line_error(result, *expected)
 
 
 @pytest.mark.parametrize(
@@ -211,10 +208,12 @@ def test_impossible_motion_in_an_odometry_file_is_refused(kitti: Path, change: s
         (["0 0 0 0 0 0 0 1", "0.1 1 0 0 0 0 0 1", "0.2 2 0 0 0 0 1 0"], ["traj.txt:3", "rotation rate", "max_turn"]),
     ],
 )
-def test_impossible_motion_in_a_simulate_trajectory_is_refused(tmp_path: Path, lines: list[str], expected: list[str]):
+def test_impossible_motion_in_a_simulate_trajectory_is_refused(
+    cli, tmp_path: Path, lines: list[str], expected: list[str]
+):
     (tmp_path / "traj.txt").write_text("\n".join(lines) + "\n")
-    result = _invoke("simulate", "--trajectory", tmp_path / "traj.txt", "--out", tmp_path / "o", "-q")
-    _one_line_error(result, *expected)
+    result = cli.invoke("simulate", "--trajectory", tmp_path / "traj.txt", "--out", tmp_path / "o", "-q")
+    cli.one_line_error(result, *expected)
     assert not (tmp_path / "o").exists()
 
 
@@ -236,7 +235,7 @@ def _npz_bytes(tmp_path: Path) -> bytes:
         ("truncated", ["patches.npy: truncated"]),
     ],
 )
-def test_broken_patches_file_is_one_line(dataset: Path, tmp_path: Path, content: str, expected: list[str]):
+def test_broken_patches_file_is_one_line(cli, dataset: Path, tmp_path: Path, content: str, expected: list[str]):
     path = dataset / "patches.npy"
     count = len(np.load(path))
     if content == "empty":
@@ -249,23 +248,23 @@ def test_broken_patches_file_is_one_line(dataset: Path, tmp_path: Path, content:
         np.save(path, np.zeros((count, 0, 0), np.uint8))
     else:
         path.write_bytes(path.read_bytes()[:-100])
-    line = _one_line_error(_invoke("run", dataset, "--out", tmp_path / "o", "-q"), *expected)
+    line = cli.one_line_error(cli.invoke("run", dataset, "--out", tmp_path / "o", "-q"), *expected)
     assert "pickle" not in line
 
 
 # --- item 9: text files that are not UTF-8 ---
 
 
-def test_dataset_yaml_that_is_not_utf8_is_one_line(dataset: Path, tmp_path: Path):
+def test_dataset_yaml_that_is_not_utf8_is_one_line(cli, dataset: Path, tmp_path: Path):
     path = dataset / "dataset.yaml"
     path.write_bytes(path.read_bytes().replace(b"name: block", b"name: bl\xffck"))
-    result = _invoke("run", dataset, "--out", tmp_path / "o", "-q")
-    _one_line_error(result, "dataset.yaml:3", "not UTF-8")
+    result = cli.invoke("run", dataset, "--out", tmp_path / "o", "-q")
+    cli.one_line_error(result, "dataset.yaml:3", "not UTF-8")
 
 
-def test_config_file_that_is_not_utf8_is_one_line(tmp_path: Path):
+def test_config_file_that_is_not_utf8_is_one_line(cli, tmp_path: Path):
     (tmp_path / "latin1.yaml").write_bytes(b"matching:\n  min_inliers: 4  # r\xe9glage\n")
-    _one_line_error(_invoke("dump-config", "--config", tmp_path / "latin1.yaml"), "latin1.yaml:2", "not UTF-8")
+    cli.one_line_error(cli.invoke("dump-config", "--config", tmp_path / "latin1.yaml"), "latin1.yaml:2", "not UTF-8")
 
 
 # --- item 10: evaluate ---
@@ -277,12 +276,12 @@ def _tum(path: Path, xs: list[float]) -> Path:
 
 
 @pytest.mark.parametrize("which", ["estimate", "truth"])
-def test_evaluate_refuses_a_position_beyond_any_drive(tmp_path: Path, which: str):
+def test_evaluate_refuses_a_position_beyond_any_drive(cli, tmp_path: Path, which: str):
     """1e300 m squared overflows: such a file is refused by line, never given a metric of inf or null."""
     files = {name: _tum(tmp_path / f"{name}.txt", [float(k) for k in range(20)]) for name in ("estimate", "truth")}
     files[which] = _tum(tmp_path / f"{which}.txt", [1e300 * (k % 2) for k in range(20)])
-    result = _invoke("evaluate", files["estimate"], files["truth"], "--json", tmp_path / "m.json")
-    _one_line_error(result, f"{which}.txt:2", "position of magnitude 1e+300")
+    result = cli.invoke("evaluate", files["estimate"], files["truth"], "--json", tmp_path / "m.json")
+    cli.one_line_error(result, f"{which}.txt:2", "position of magnitude 1e+300")
     assert not (tmp_path / "m.json").exists()
 
 
@@ -298,28 +297,28 @@ LOOP_HEADER = "query_frame,match_frame,query_keyframe,match_keyframe,score,match
         ("150,3,8,1,10.0,5,0,0,0,0,0,0,0", ["loops.csv:2", "zero quaternion"]),
     ],
 )
-def test_evaluate_loops_with_a_bad_row_is_one_line(tmp_path: Path, row: str, expected: list[str]):
+def test_evaluate_loops_with_a_bad_row_is_one_line(cli, tmp_path: Path, row: str, expected: list[str]):
     truth = _tum(tmp_path / "truth.txt", [float(k) for k in range(200)])
     (tmp_path / "loops.csv").write_text(LOOP_HEADER + row + "\n")
-    _one_line_error(_invoke("evaluate", truth, truth, "--loops", tmp_path / "loops.csv"), *expected)
+    cli.one_line_error(cli.invoke("evaluate", truth, truth, "--loops", tmp_path / "loops.csv"), *expected)
 
 
-def test_evaluate_sim3_against_a_stationary_truth_is_refused(tmp_path: Path):
+def test_evaluate_sim3_against_a_stationary_truth_is_refused(cli, tmp_path: Path):
     truth = tmp_path / "still.txt"
     truth.write_text("".join(f"{0.1 * k:.1f} 5 5 5 0 0 0 1\n" for k in range(20)))
     estimate = _tum(tmp_path / "estimate.txt", [float(k) for k in range(20)])
-    result = _invoke("evaluate", estimate, truth, "--align", "sim3")
-    _one_line_error(result, "still.txt", "all at one place", "sim3")
+    result = cli.invoke("evaluate", estimate, truth, "--align", "sim3")
+    cli.one_line_error(result, "still.txt", "all at one place", "sim3")
 
 
 # --- item 11: a detections line nested 100,000 deep ---
 
 
-def test_deeply_nested_detections_line_is_one_line(kitti: Path):
+def test_deeply_nested_detections_line_is_one_line(cli, kitti: Path):
     nested = "[" * 100_000 + "]" * 100_000
     (kitti / "deep.jsonl").write_text('{"frame": 0, "detections": ' + nested + "}\n")
-    result = _run_kitti(kitti, kitti.parent / "o", detections=kitti / "deep.jsonl")
-    _one_line_error(result, "deep.jsonl:1", "nested too deeply")
+    result = _run_kitti(cli, kitti, kitti.parent / "o", detections=kitti / "deep.jsonl")
+    cli.one_line_error(result, "deep.jsonl:1", "nested too deeply")
 
 
 # --- item 12: config values that validate today but crash a run ---
@@ -345,55 +344,55 @@ def test_deeply_nested_detections_line_is_one_line(kitti: Path):
         ("experience_map: {similarity_threshold: .nan}", "experience_map.similarity_threshold"),
     ],
 )
-def test_config_values_out_of_range_name_the_field(tmp_path: Path, yaml_text: str, field: str):
+def test_config_values_out_of_range_name_the_field(cli, tmp_path: Path, yaml_text: str, field: str):
     (tmp_path / "c.yaml").write_text(yaml_text + "\n")
-    _one_line_error(_invoke("dump-config", "--config", tmp_path / "c.yaml"), "c.yaml", f"{field}: ")
+    cli.one_line_error(cli.invoke("dump-config", "--config", tmp_path / "c.yaml"), "c.yaml", f"{field}: ")
 
 
-def test_inhibition_that_kills_the_attractor_is_one_line(dataset: Path, tmp_path: Path):
+def test_inhibition_that_kills_the_attractor_is_one_line(cli, dataset: Path, tmp_path: Path):
     (tmp_path / "c.yaml").write_text("grid_cells: {global_inhibition: 0.5}\n")
-    result = _invoke("run", dataset, "--config", tmp_path / "c.yaml", "--out", tmp_path / "o", "-q")
-    _one_line_error(result, "grid_cells: the attractor activity vanished", "global_inhibition 0.5")
+    result = cli.invoke("run", dataset, "--config", tmp_path / "c.yaml", "--out", tmp_path / "o", "-q")
+    cli.one_line_error(result, "grid_cells: the attractor activity vanished", "global_inhibition 0.5")
     assert not (tmp_path / "o").exists()
 
 
 # --- item 13: messages that named the wrong thing or said too little ---
 
 
-def test_invalid_camera_block_names_the_field(dataset: Path, tmp_path: Path):
+def test_invalid_camera_block_names_the_field(cli, dataset: Path, tmp_path: Path):
     path = dataset / "dataset.yaml"
     meta = yaml.safe_load(path.read_text())
     meta["camera"]["fx"] = -3
     path.write_text(yaml.safe_dump(meta, sort_keys=False))
-    line = _one_line_error(_invoke("run", dataset, "--out", tmp_path / "o", "-q"), "dataset.yaml", "camera.fx")
+    line = cli.one_line_error(cli.invoke("run", dataset, "--out", tmp_path / "o", "-q"), "dataset.yaml", "camera.fx")
     assert "greater than 0" in line and "validation error" not in line
 
 
-def test_unknown_environment_section_names_the_whole_variable():
-    _one_line_error(_invoke("dump-config", env={"NEOSLAM_FOO__BAR": "1"}), "NEOSLAM_FOO__BAR")
+def test_unknown_environment_section_names_the_whole_variable(cli):
+    cli.one_line_error(cli.invoke("dump-config", env={"NEOSLAM_FOO__BAR": "1"}), "NEOSLAM_FOO__BAR")
 
 
-def test_dataset_yaml_without_frames_blames_dataset_yaml(dataset: Path, tmp_path: Path):
+def test_dataset_yaml_without_frames_blames_dataset_yaml(cli, dataset: Path, tmp_path: Path):
     path = dataset / "dataset.yaml"
     meta = yaml.safe_load(path.read_text())
     del meta["frames"]
     path.write_text(yaml.safe_dump(meta, sort_keys=False))
-    line = _one_line_error(_invoke("run", dataset, "--out", tmp_path / "o", "-q"), "no 'frames' entry")
+    line = cli.one_line_error(cli.invoke("run", dataset, "--out", tmp_path / "o", "-q"), "no 'frames' entry")
     assert line.startswith(f"neoslam: error: {dataset / 'dataset.yaml'}: ")
 
 
-def test_ground_truth_one_pose_short_names_the_pose_file(kitti: Path):
+def test_ground_truth_one_pose_short_names_the_pose_file(cli, kitti: Path):
     path = kitti / "poses" / "06.txt"
     path.write_text("".join(path.read_text().splitlines(keepends=True)[:-1]))
-    result = _run_kitti(kitti, kitti.parent / "o", odometry=kitti_odometry(kitti))
-    _one_line_error(result, "poses/06.txt", f"{KITTI_FRAMES - 1} poses for the {KITTI_FRAMES} frames")
+    result = _run_kitti(cli, kitti, kitti.parent / "o", odometry=kitti_odometry(kitti))
+    cli.one_line_error(result, "poses/06.txt", f"{KITTI_FRAMES - 1} poses for the {KITTI_FRAMES} frames")
 
 
-def test_detection_frame_beyond_the_sequence_names_its_line(kitti: Path):
+def test_detection_frame_beyond_the_sequence_names_its_line(cli, kitti: Path):
     lines = [json.dumps({"frame": i, "detections": []}) for i in (0, 1, 40)]
     (kitti / "far.jsonl").write_text("\n".join(lines) + "\n")
-    result = _run_kitti(kitti, kitti.parent / "o", detections=kitti / "far.jsonl")
-    _one_line_error(result, "far.jsonl:3", "frame 40 is beyond the 3 frames")
+    result = _run_kitti(cli, kitti, kitti.parent / "o", detections=kitti / "far.jsonl")
+    cli.one_line_error(result, "far.jsonl:3", "frame 40 is beyond the 3 frames")
 
 
 @pytest.mark.parametrize(
@@ -401,7 +400,7 @@ def test_detection_frame_beyond_the_sequence_names_its_line(kitti: Path):
     [("truncated", "truncated PNG (its closing IEND chunk is missing)"), ("corrupt", "not a readable image")],
 )
 def test_a_broken_png_is_one_line_without_libpng_output(
-    kitti: Path, capfd: pytest.CaptureFixture[str], damage: str, expected: str
+    cli, kitti: Path, capfd: pytest.CaptureFixture[str], damage: str, expected: str
 ):
     """libpng and OpenCV write their complaints to file descriptor 2 themselves (not through sys.stderr, which the
     runner captures): capfd sees what a user's terminal would."""
@@ -413,8 +412,8 @@ def test_a_broken_png_is_one_line_without_libpng_output(
         data[len(data) // 2 : len(data) // 2 + 64] = bytes(64)  # a damaged IDAT chunk: its CRC fails
     image.write_bytes(bytes(data))
     capfd.readouterr()
-    result = _run_kitti(kitti, kitti.parent / "o")
-    _one_line_error(result, f"{image}: {expected}")
+    result = _run_kitti(cli, kitti, kitti.parent / "o")
+    cli.one_line_error(result, f"{image}: {expected}")
     assert capfd.readouterr().err == ""
 
 
@@ -433,10 +432,10 @@ def test_a_broken_png_is_one_line_without_libpng_output(
     ],
 )
 def test_detections_csv_refuses_what_the_json_reader_refuses(
-    dataset: Path, tmp_path: Path, column: str, value: str, expected: str
+    cli, dataset: Path, tmp_path: Path, column: str, value: str, expected: str
 ):
     _set_cell(dataset / "detections.csv", 2, column, value)
-    _one_line_error(_invoke("run", dataset, "--out", tmp_path / "o", "-q"), "detections.csv:4", expected)
+    cli.one_line_error(cli.invoke("run", dataset, "--out", tmp_path / "o", "-q"), "detections.csv:4", expected)
 
 
 @pytest.mark.parametrize(
@@ -447,33 +446,35 @@ def test_detections_csv_refuses_what_the_json_reader_refuses(
         ({"label": "car", "score": 0.5, "box": [3, 2, 1, 4]}, '"box" must have x1 < x2'),
     ],
 )
-def test_the_json_reader_refuses_the_same_values(kitti: Path, detection: dict, expected: str):
+def test_the_json_reader_refuses_the_same_values(cli, kitti: Path, detection: dict, expected: str):
     (kitti / "d.jsonl").write_text(json.dumps({"frame": 1, "detections": [detection]}) + "\n")
-    _one_line_error(_run_kitti(kitti, kitti.parent / "o", detections=kitti / "d.jsonl"), "d.jsonl:1", expected)
+    cli.one_line_error(_run_kitti(cli, kitti, kitti.parent / "o", detections=kitti / "d.jsonl"), "d.jsonl:1", expected)
 
 
-def test_two_p1_lines_in_calib_are_refused(kitti: Path):
+def test_two_p1_lines_in_calib_are_refused(cli, kitti: Path):
     path = kitti / "sequences" / "06" / "calib.txt"
     path.write_text(path.read_text() + f"P1: {P1.replace('-379.8145', '-400')}\n")
-    _one_line_error(_run_kitti(kitti, kitti.parent / "o"), "calib.txt:3", "a second P1 line (the first is line 2)")
+    cli.one_line_error(
+        _run_kitti(cli, kitti, kitti.parent / "o"), "calib.txt:3", "a second P1 line (the first is line 2)"
+    )
 
 
 def _with_bom(path: Path) -> None:
     path.write_bytes(BOM + path.read_bytes())
 
 
-def test_a_byte_order_mark_is_accepted_in_every_dataset_file(dataset: Path, tmp_path: Path):
+def test_a_byte_order_mark_is_accepted_in_every_dataset_file(cli, dataset: Path, tmp_path: Path):
     for name in ("dataset.yaml", "frames.csv", "detections.csv", "truth/poses_tum.txt"):
         _with_bom(dataset / name)
     (tmp_path / "c.yaml").write_bytes(BOM + b"keyframes:\n  spacing: 5.0\n")
-    _ok(_invoke("run", dataset, "--config", tmp_path / "c.yaml", "--out", tmp_path / "o", "-q"))
+    _ok(cli.invoke("run", dataset, "--config", tmp_path / "c.yaml", "--out", tmp_path / "o", "-q"))
 
 
-def test_a_byte_order_mark_is_accepted_in_every_kitti_file(kitti: Path):
+def test_a_byte_order_mark_is_accepted_in_every_kitti_file(cli, kitti: Path):
     folder = kitti / "sequences" / "06"
     for path in (folder / "calib.txt", folder / "times.txt", kitti / "poses" / "06.txt"):
         _with_bom(path)
     (kitti / "d.jsonl").write_bytes(BOM + json.dumps({"frame": 0, "detections": []}).encode() + b"\n")
     odometry = kitti_odometry(kitti)
     _with_bom(odometry)
-    _ok(_run_kitti(kitti, kitti.parent / "o", detections=kitti / "d.jsonl", odometry=odometry))
+    _ok(_run_kitti(cli, kitti, kitti.parent / "o", detections=kitti / "d.jsonl", odometry=odometry))

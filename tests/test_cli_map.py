@@ -20,9 +20,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cli_runner import invoke as _invoke
-from cli_runner import ok as _ok
-from cli_runner import one_line_error as _one_line_error
 from neoslam.config import NeoSLAMConfig
 from neoslam.store.map_file import MapFile
 
@@ -40,18 +37,18 @@ def _tum_positions(path: Path) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def street(tmp_path_factory) -> Path:
+def street(cli, tmp_path_factory) -> Path:
     """The block route, simulated once (the street both sessions drive)."""
     folder = tmp_path_factory.mktemp("street") / "block"
-    _ok("simulate", "--route", "block", "--noise", "vo", "--seed", "1", "--out", folder, "--quiet")
+    cli.ok("simulate", "--route", "block", "--noise", "vo", "--seed", "1", "--out", folder, "--quiet")
     return folder
 
 
 @pytest.fixture(scope="module")
-def first_session(street: Path, tmp_path_factory) -> tuple[Path, Path]:
+def first_session(cli, street: Path, tmp_path_factory) -> tuple[Path, Path]:
     """Session A: its map file and results folder."""
     folder = tmp_path_factory.mktemp("session_a")
-    _ok("run", street, "--map", folder / "map.db", "--out", folder / "results", "--quiet")
+    cli.ok("run", street, "--map", folder / "map.db", "--out", folder / "results", "--quiet")
     return folder / "map.db", folder / "results"
 
 
@@ -77,9 +74,9 @@ def test_the_first_session_makes_a_map_in_its_own_frame(first_session):
 
 
 @pytest.mark.slow
-def test_a_second_session_relocalises_in_the_map_and_extends_it(street, first_session, map_copy, tmp_path):
+def test_a_second_session_relocalises_in_the_map_and_extends_it(cli, street, first_session, map_copy, tmp_path):
     results_a = first_session[1]
-    _ok("run", street, "--map", map_copy, "--out", tmp_path / "b", "--quiet")
+    cli.ok("run", street, "--map", map_copy, "--out", tmp_path / "b", "--quiet")
     session = _metrics(tmp_path / "b")["session"]
     assert session["id"] == 2 and session["map_keyframes"] == _metrics(results_a)["keyframes"]
     assert session["relocalised_frame"] is not None and session["relocalised_frame"] < 100
@@ -97,9 +94,9 @@ def test_a_second_session_relocalises_in_the_map_and_extends_it(street, first_se
 
 
 @pytest.mark.slow
-def test_localise_only_uses_the_map_and_changes_nothing_in_it(street, map_copy, tmp_path):
+def test_localise_only_uses_the_map_and_changes_nothing_in_it(cli, street, map_copy, tmp_path):
     before = _digest(map_copy)
-    _ok("run", street, "--map", map_copy, "--localise-only", "--out", tmp_path / "c", "--quiet")
+    cli.ok("run", street, "--map", map_copy, "--localise-only", "--out", tmp_path / "c", "--quiet")
     session = _metrics(tmp_path / "c")["session"]
     assert session["localise_only"] and session["relocalised_frame"] is not None
     assert _digest(map_copy) == before
@@ -107,21 +104,23 @@ def test_localise_only_uses_the_map_and_changes_nothing_in_it(street, map_copy, 
 
 
 @pytest.mark.slow
-def test_the_same_sessions_give_the_same_map(street, first_session, tmp_path):
-    _ok("run", street, "--map", tmp_path / "again.db", "--out", tmp_path / "a", "--quiet")
+def test_the_same_sessions_give_the_same_map(cli, street, first_session, tmp_path):
+    cli.ok("run", street, "--map", tmp_path / "again.db", "--out", tmp_path / "a", "--quiet")
     assert _digest(tmp_path / "again.db") == _digest(first_session[0])
 
 
-def test_localise_only_needs_a_map(street, tmp_path):
-    _one_line_error(_invoke("run", street, "--localise-only", "--out", tmp_path / "r"), "--localise-only needs --map")
-    result = _invoke("run", street, "--map", tmp_path / "none.db", "--localise-only", "--out", tmp_path / "r")
-    _one_line_error(result, "none.db", "map not found")
+def test_localise_only_needs_a_map(cli, street, tmp_path):
+    cli.one_line_error(
+        cli.invoke("run", street, "--localise-only", "--out", tmp_path / "r"), "--localise-only needs --map"
+    )
+    result = cli.invoke("run", street, "--map", tmp_path / "none.db", "--localise-only", "--out", tmp_path / "r")
+    cli.one_line_error(result, "none.db", "map not found")
     assert not (tmp_path / "none.db").exists() and not (tmp_path / "r").exists()
 
 
-def test_a_run_that_fails_on_its_input_makes_no_map(tmp_path):
-    result = _invoke("run", tmp_path / "missing", "--map", tmp_path / "new.db", "--out", tmp_path / "r")
-    _one_line_error(result, "missing")
+def test_a_run_that_fails_on_its_input_makes_no_map(cli, tmp_path):
+    result = cli.invoke("run", tmp_path / "missing", "--map", tmp_path / "new.db", "--out", tmp_path / "r")
+    cli.one_line_error(result, "missing")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["missing"] or not any(tmp_path.iterdir())
 
 
@@ -134,46 +133,50 @@ def test_a_run_that_fails_on_its_input_makes_no_map(tmp_path):
     ],
     ids=["empty", "text", "png"],
 )
-def test_a_file_that_is_not_a_map_is_refused_and_left_alone(street, tmp_path, content, expected):
+def test_a_file_that_is_not_a_map_is_refused_and_left_alone(cli, street, tmp_path, content, expected):
     path = tmp_path / "map.db"
     path.write_bytes(content)
-    line = _one_line_error(_invoke("run", street, "--map", path, "--out", tmp_path / "r"), "map.db")
+    line = cli.one_line_error(cli.invoke("run", street, "--map", path, "--out", tmp_path / "r"), "map.db")
     assert expected in line
     assert path.read_bytes() == content and not (tmp_path / "r").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["map.db"]
 
 
-def test_a_sqlite_file_of_another_program_is_refused(street, tmp_path):
+def test_a_sqlite_file_of_another_program_is_refused(cli, street, tmp_path):
     path = tmp_path / "other.db"
     with closing(sqlite3.connect(path)) as connection:
         connection.execute("CREATE TABLE notes (text TEXT)")
         connection.commit()
     before = _digest(path)
-    _one_line_error(_invoke("run", street, "--map", path, "--out", tmp_path / "r"), "other.db", "not a NeoSLAM map")
+    cli.one_line_error(
+        cli.invoke("run", street, "--map", path, "--out", tmp_path / "r"), "other.db", "not a NeoSLAM map"
+    )
     assert _digest(path) == before
 
 
-def test_a_truncated_map_is_refused_and_left_alone(street, map_copy, tmp_path):
+def test_a_truncated_map_is_refused_and_left_alone(cli, street, map_copy, tmp_path):
     map_copy.write_bytes(map_copy.read_bytes()[: map_copy.stat().st_size // 2])
     before = _digest(map_copy)
-    _one_line_error(_invoke("run", street, "--map", map_copy, "--out", tmp_path / "r"), "map.db")
+    cli.one_line_error(cli.invoke("run", street, "--map", map_copy, "--out", tmp_path / "r"), "map.db")
     assert _digest(map_copy) == before
 
 
-def test_a_map_made_with_another_config_is_refused(street, map_copy, tmp_path):
+def test_a_map_made_with_another_config_is_refused(cli, street, map_copy, tmp_path):
     config = tmp_path / "other.yaml"
     config.write_text("keyframes:\n  spacing: 7.5\n")
     before = _digest(map_copy)
-    result = _invoke("run", street, "--map", map_copy, "--config", config, "--out", tmp_path / "r")
-    _one_line_error(result, "map.db", "keyframes.spacing")
+    result = cli.invoke("run", street, "--map", map_copy, "--config", config, "--out", tmp_path / "r")
+    cli.one_line_error(result, "map.db", "keyframes.spacing")
     assert _digest(map_copy) == before
 
 
-def test_a_map_inside_the_results_folder_or_an_input_is_refused(street, tmp_path):
-    result = _invoke("run", street, "--map", tmp_path / "r" / "map.db", "--out", tmp_path / "r")
-    _one_line_error(result, "results folder")
-    _one_line_error(_invoke("run", street, "--map", street / "map.db", "--out", tmp_path / "r2"), "inside the input")
-    _one_line_error(_invoke("run", street, "--map", tmp_path, "--out", tmp_path / "r3"), "folder")
+def test_a_map_inside_the_results_folder_or_an_input_is_refused(cli, street, tmp_path):
+    result = cli.invoke("run", street, "--map", tmp_path / "r" / "map.db", "--out", tmp_path / "r")
+    cli.one_line_error(result, "results folder")
+    cli.one_line_error(
+        cli.invoke("run", street, "--map", street / "map.db", "--out", tmp_path / "r2"), "inside the input"
+    )
+    cli.one_line_error(cli.invoke("run", street, "--map", tmp_path, "--out", tmp_path / "r3"), "folder")
     assert not (street / "map.db").exists()
 
 
@@ -185,7 +188,7 @@ def _executable() -> str:
 
 
 @pytest.mark.slow
-def test_a_run_killed_mid_way_leaves_a_map_a_later_session_relocalises_in(street, first_session, tmp_path):
+def test_a_run_killed_mid_way_leaves_a_map_a_later_session_relocalises_in(cli, street, first_session, tmp_path):
     """SIGKILL (no handler runs) once the run has committed: the map opens, passes SQLite's integrity check, holds
     a prefix of what the whole run stores, and a later session relocalises in it. (benchmarks/sessions.py kills
     20 runs at random moments.)"""
@@ -207,5 +210,5 @@ def test_a_run_killed_mid_way_leaves_a_map_a_later_session_relocalises_in(street
     for kept, complete in zip(killed.keyframes, whole.keyframes, strict=False):
         assert kept.id == complete.id and np.array_equal(kept.centers, complete.centers)
     assert not (tmp_path / "r").exists()
-    _ok("run", street, "--map", path, "--out", tmp_path / "later", "--quiet")
+    cli.ok("run", street, "--map", path, "--out", tmp_path / "later", "--quiet")
     assert _metrics(tmp_path / "later")["session"]["relocalised_frame"] is not None

@@ -12,24 +12,11 @@ import time
 from pathlib import Path
 
 import pytest
-from typer.testing import CliRunner
 
-from neoslam.cli import app
 from neoslam.errors import OutputError
 from neoslam.io.atomic import atomic_directory, atomic_file
 
 STOP_WITHIN_S = 1.0
-
-
-def _invoke(*args: object):
-    return CliRunner().invoke(app, [str(a) for a in args])
-
-
-def _refused(result, *words: str) -> None:
-    assert result.exit_code == 2, result.output
-    assert result.stderr.count("\n") == 1 and result.stderr.startswith("neoslam: error: "), result.stderr
-    for word in words:
-        assert word in result.stderr, result.stderr
 
 
 def _fingerprint(folder: Path) -> dict[str, str]:
@@ -44,11 +31,10 @@ def _no_partials(folder: Path) -> None:
 
 
 @pytest.fixture(scope="module")
-def dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def dataset(cli, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A small simulated dataset (the built-in block route) inside a folder of its own."""
     folder = tmp_path_factory.mktemp("inputs") / "block"
-    result = _invoke("simulate", "--route", "block", "--seed", "1", "--out", folder, "-q")
-    assert result.exit_code == 0, result.output
+    cli.ok("simulate", "--route", "block", "--seed", "1", "--out", folder, "-q")
     return folder
 
 
@@ -63,63 +49,63 @@ def kitti_root(tmp_path: Path) -> Path:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("where", ["itself", "parent", "inside"])
-def test_run_refuses_an_output_at_its_dataset(dataset: Path, where: str) -> None:
+def test_run_refuses_an_output_at_its_dataset(cli, dataset: Path, where: str) -> None:
     out = {"itself": dataset, "parent": dataset.parent, "inside": dataset / "results"}[where]
     before = _fingerprint(dataset.parent)
-    _refused(_invoke("run", dataset, "--out", out, "--overwrite", "-q"), str(out), "input")
+    cli.one_line_error(cli.invoke("run", dataset, "--out", out, "--overwrite", "-q"), str(out), "input")
     assert _fingerprint(dataset.parent) == before
 
 
-def test_run_refuses_an_output_reached_through_a_link(dataset: Path, tmp_path: Path) -> None:
+def test_run_refuses_an_output_reached_through_a_link(cli, dataset: Path, tmp_path: Path) -> None:
     link = tmp_path / "link"
     link.symlink_to(dataset.parent, target_is_directory=True)
     before = _fingerprint(dataset)
-    _refused(_invoke("run", link / dataset.name, "--out", dataset, "--overwrite", "-q"), "input")
+    cli.one_line_error(cli.invoke("run", link / dataset.name, "--out", dataset, "--overwrite", "-q"), "input")
     assert _fingerprint(dataset) == before
 
 
 @pytest.mark.parametrize("where", ["root", "inside"])
-def test_run_refuses_an_output_at_a_kitti_root(kitti_root: Path, where: str) -> None:
+def test_run_refuses_an_output_at_a_kitti_root(cli, kitti_root: Path, where: str) -> None:
     out = kitti_root if where == "root" else kitti_root / "sequences"
     before = _fingerprint(kitti_root)
-    _refused(_invoke("run", kitti_root, "--sequence", "06", "--out", out, "--overwrite", "-q"), "input")
+    cli.one_line_error(cli.invoke("run", kitti_root, "--sequence", "06", "--out", out, "--overwrite", "-q"), "input")
     assert _fingerprint(kitti_root) == before
 
 
-def test_detect_refuses_an_output_inside_its_root(kitti_root: Path) -> None:
+def test_detect_refuses_an_output_inside_its_root(cli, kitti_root: Path) -> None:
     out = kitti_root / "sequences" / "06" / "image_0" / "000000.png"
-    _refused(_invoke("detect", kitti_root, "--sequence", "06", "--out", out, "--overwrite", "-q"), "input")
+    cli.one_line_error(cli.invoke("detect", kitti_root, "--sequence", "06", "--out", out, "--overwrite", "-q"), "input")
     assert out.read_bytes() == b"image"
 
 
-def test_simulate_refuses_the_folder_of_its_trajectory(tmp_path: Path) -> None:
+def test_simulate_refuses_the_folder_of_its_trajectory(cli, tmp_path: Path) -> None:
     folder = tmp_path / "poses"
     folder.mkdir()
     trajectory = folder / "t.txt"
     trajectory.write_text("".join(f"{i * 0.1} {i} 0 0 0 0 0 1\n" for i in range(20)))
     before = _fingerprint(folder)
     args = ("simulate", "--trajectory", trajectory, "--format", "tum", "--out", folder, "--overwrite", "-q")
-    _refused(_invoke(*args), str(folder), "input")
+    cli.one_line_error(cli.invoke(*args), str(folder), "input")
     assert _fingerprint(folder) == before
 
 
-def test_run_refuses_an_output_at_its_config_or_detections(dataset: Path, tmp_path: Path) -> None:
+def test_run_refuses_an_output_at_its_config_or_detections(cli, dataset: Path, tmp_path: Path) -> None:
     config = tmp_path / "my.yaml"
     config.write_text("seed: 3\n")
-    _refused(_invoke("run", dataset, "--config", config, "--out", config, "--overwrite", "-q"), "input")
+    cli.one_line_error(cli.invoke("run", dataset, "--config", config, "--out", config, "--overwrite", "-q"), "input")
     assert config.read_text() == "seed: 3\n"
 
 
-def test_evaluate_refuses_json_over_an_input(tmp_path: Path) -> None:
+def test_evaluate_refuses_json_over_an_input(cli, tmp_path: Path) -> None:
     tum = tmp_path / "t.txt"
     tum.write_text("".join(f"{i * 0.1} {i} 0 0 0 0 0 1\n" for i in range(10)))
-    _refused(_invoke("evaluate", tum, tum, "--json", tum), "input")
+    cli.one_line_error(cli.invoke("evaluate", tum, tum, "--json", tum), "input")
     assert tum.read_text().count("\n") == 10
 
 
 @pytest.mark.parametrize("overwrite", [False, True])
 def test_the_working_folder_and_its_parents_are_refused(
-    dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, overwrite: bool
+    cli, dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, overwrite: bool
 ) -> None:
     work = tmp_path / "work"
     work.mkdir()
@@ -127,35 +113,35 @@ def test_the_working_folder_and_its_parents_are_refused(
     monkeypatch.chdir(work)
     flag = ["--overwrite"] if overwrite else []
     for out in (".", "..", str(work)):
-        _refused(_invoke("run", dataset, "--out", out, *flag, "-q"), "working folder")
+        cli.one_line_error(cli.invoke("run", dataset, "--out", out, *flag, "-q"), "working folder")
     assert (work / "notes.txt").read_text() == "mine" and sorted(p.name for p in work.iterdir()) == ["notes.txt"]
 
 
 def test_an_empty_working_folder_is_refused_before_the_run(
-    dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    cli, dataset: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.chdir(tmp_path)
-    _refused(_invoke("run", dataset, "--out", ".", "-q"), "working folder")
+    cli.one_line_error(cli.invoke("run", dataset, "--out", ".", "-q"), "working folder")
     assert list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize("dangling", [False, True])
-def test_a_linked_output_is_refused_before_any_work(dataset: Path, tmp_path: Path, dangling: bool) -> None:
+def test_a_linked_output_is_refused_before_any_work(cli, dataset: Path, tmp_path: Path, dangling: bool) -> None:
     real = tmp_path / "real"
     if not dangling:
         real.mkdir()
     link = tmp_path / "results"
     link.symlink_to(real, target_is_directory=True)
     start = time.perf_counter()
-    _refused(_invoke("run", dataset, "--out", link, "--overwrite", "-q"), str(link), "symbolic link")
+    cli.one_line_error(cli.invoke("run", dataset, "--out", link, "--overwrite", "-q"), str(link), "symbolic link")
     assert time.perf_counter() - start < 5.0  # refused up front, not after the run (functional bound, not speed)
     assert link.is_symlink() and real.exists() != dangling
     _no_partials(tmp_path)
 
 
-def test_a_failed_run_leaves_no_parent_folders(tmp_path: Path) -> None:
+def test_a_failed_run_leaves_no_parent_folders(cli, tmp_path: Path) -> None:
     missing = tmp_path / "no-such-dataset"
-    _refused(_invoke("run", missing, "--out", tmp_path / "a" / "b" / "c", "-q"), str(missing))
+    cli.one_line_error(cli.invoke("run", missing, "--out", tmp_path / "a" / "b" / "c", "-q"), str(missing))
     assert list(tmp_path.iterdir()) == []
 
 

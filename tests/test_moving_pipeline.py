@@ -59,8 +59,14 @@ def _run(enabled: bool) -> RunResult:
 
 
 @pytest.fixture(scope="module")
-def runs() -> dict[bool, RunResult]:
-    return {enabled: _run(enabled) for enabled in (True, False)}
+def _runs(keep):
+    return keep({enabled: _run(enabled) for enabled in (True, False)})
+
+
+@pytest.fixture
+def runs(_runs) -> dict[bool, RunResult]:
+    """The street run with the motion detector on (True) and off (False); copies for this test."""
+    return _runs.copy()
 
 
 def test_keyframes_and_the_map_leave_the_traffic_out(runs: dict[bool, RunResult]) -> None:
@@ -92,8 +98,8 @@ def test_objects_csv_has_the_moving_column(runs: dict[bool, RunResult], tmp_path
     assert [row[-1] for row in rows] == ["0"] * len(on.objects) + ["1"] * len(on.moving_objects)
 
 
-def test_same_street_same_result() -> None:
-    first, second = _run(True), _run(True)
+def test_same_street_same_result(runs: dict[bool, RunResult]) -> None:
+    first, second = runs[True], _run(True)  # the first run was made for the other tests
     assert [o.position.tolist() for o in first.moving_objects] == [o.position.tolist() for o in second.moving_objects]
     assert [k.centers.tolist() for k in first.keyframes] == [k.centers.tolist() for k in second.keyframes]
 

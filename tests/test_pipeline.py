@@ -9,21 +9,13 @@ import pytest
 
 from neoslam.cells import ObjectVectorCells
 from neoslam.commands.run import run_dataset
-from neoslam.config import NeoSLAMConfig, SimulatorConfig
-from neoslam.datasets.simulated import read_dataset, write_dataset
+from neoslam.config import NeoSLAMConfig
+from neoslam.datasets.simulated import read_dataset
 from neoslam.geometry import make_pose, robot_points_to_camera
-from neoslam.pipeline import object_vectors, run
-from neoslam.sim.simulator import simulate_route
+from neoslam.pipeline import RunResult, object_vectors, run
 from neoslam.types import ObjectObservation
 
-CONFIG = NeoSLAMConfig()
-
-
-@pytest.fixture(scope="module")
-def block(tmp_path_factory) -> Path:
-    folder = tmp_path_factory.mktemp("block") / "data"
-    write_dataset(folder, simulate_route("block", SimulatorConfig(seed=5)))
-    return folder
+CONFIG = NeoSLAMConfig()  # the config of block_seed5_run
 
 
 def _observation_at(point_robot: np.ndarray) -> ObjectObservation:
@@ -42,7 +34,7 @@ def test_object_vectors_are_allocentric() -> None:
 
 
 @pytest.mark.slow
-def test_cells_integrate_the_odometry(block: Path) -> None:
+def test_cells_integrate_the_odometry(block_seed5: Path) -> None:
     # No Hebbian recall: an injection at a loop closure would (rightly) pull the cells off the odometry.
     silent = CONFIG.model_copy(
         update={
@@ -50,7 +42,7 @@ def test_cells_integrate_the_odometry(block: Path) -> None:
             "head_direction": CONFIG.head_direction.model_copy(update={"injection_energy": 0.0}),
         }
     )
-    dataset = read_dataset(block)
+    dataset = read_dataset(block_seed5)
     result = run(dataset.frames(), silent, total=len(dataset), progress=False)
     error = np.linalg.norm(result.cell_states[:, :3] - result.odometry.positions, axis=1)
     # 600 m of driving on a 72 m torus: the unwrapped packet stays within a few metres of what it integrates.
@@ -64,9 +56,8 @@ def _yaw(poses: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.slow
-def test_object_vector_cells_train_on_keyframes(block: Path) -> None:
-    dataset = read_dataset(block)
-    result = run(dataset.frames(), CONFIG, total=len(dataset), progress=False)
+def test_object_vector_cells_train_on_keyframes(block_seed5_run: RunResult) -> None:
+    result = block_seed5_run  # the default config's run
     losses = result.object_vector_cells.loss_history
     config = CONFIG.object_vector
     # One epoch per 20 keyframes made (paper), up to 10 epochs; the short block route makes about 110 keyframes
@@ -78,8 +69,8 @@ def test_object_vector_cells_train_on_keyframes(block: Path) -> None:
 
 
 @pytest.mark.slow
-def test_results_hold_a_trained_network_that_reloads(block: Path, tmp_path: Path) -> None:
-    metrics = run_dataset(block, tmp_path / "out", CONFIG, progress=False)
+def test_results_hold_a_trained_network_that_reloads(block_seed5: Path, tmp_path: Path) -> None:
+    metrics = run_dataset(block_seed5, tmp_path / "out", CONFIG, progress=False)
     cells = ObjectVectorCells.load(tmp_path / "out" / "ovcn.pt")
     assert len(cells.loss_history) == metrics["cells"]["ovcn_epochs"] >= 3
     rows = (tmp_path / "out" / "ovcn_loss.csv").read_text().splitlines()
@@ -89,9 +80,9 @@ def test_results_hold_a_trained_network_that_reloads(block: Path, tmp_path: Path
 
 
 @pytest.mark.slow
-def test_two_runs_give_the_same_network(block: Path) -> None:
-    dataset = read_dataset(block)
-    first = run(dataset.frames(), CONFIG, total=len(dataset), progress=False)
+def test_two_runs_give_the_same_network(block_seed5: Path, block_seed5_run: RunResult) -> None:
+    dataset = read_dataset(block_seed5)
+    first = block_seed5_run  # the same run, made earlier in the session
     second = run(dataset.frames(), CONFIG, total=len(dataset), progress=False)
     assert first.object_vector_cells.loss_history == second.object_vector_cells.loss_history
     np.testing.assert_array_equal(first.cell_states, second.cell_states)

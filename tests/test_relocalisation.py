@@ -4,49 +4,28 @@ one's map and ends in its frame; a session whose world the map never saw never j
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from neoslam.config import NeoSLAMConfig
 from neoslam.config.profiles import simulation_config
-from neoslam.datasets.simulated import read_dataset, write_dataset
+from neoslam.datasets.simulated import write_dataset
 from neoslam.geometry import invert_pose
-from neoslam.pipeline import NeoSLAM, RunResult
 from neoslam.sim.routes import ROUTES, drive_route
-from neoslam.sim.session_drives import SessionRecording, session_recordings
-from neoslam.types import MapState
+from neoslam.sim.session_drives import session_recordings
 
 TRUE_PLACE_M = 5.0  # a closure is true when its two frames are this close in the ground truth
 SAME_PLACE_M = 2.0  # a frame of B drives A's street when it passes this close to a frame of A (ground truth)
-
-
-def _drive(
-    session: SessionRecording, config: NeoSLAMConfig, stored: MapState | None, folder: Path
-) -> tuple[NeoSLAM, RunResult]:
-    """Session recorded to a dataset folder and read back (as a run reads it), then driven."""
-    write_dataset(folder, session.recording)
-    slam = NeoSLAM(config, stored, session.recording.name)
-    for frame in read_dataset(folder).frames():
-        slam.step(frame)
-    return slam, slam.result(np.zeros(0))
-
-
-@pytest.fixture(scope="module")
-def town_sessions() -> tuple[list[SessionRecording], NeoSLAMConfig]:
-    config = NeoSLAMConfig()
-    sim = simulation_config(config, "vo", 3).simulator
-    truth = drive_route(ROUTES["town"], sim.frame_period, sim.camera.height_above_ground)
-    return session_recordings(truth, [(0, 1800), (1300, len(truth))], sim, [3, 4], "town"), config
+CONFIG = NeoSLAMConfig()  # the config town_session_a was driven with
 
 
 @pytest.mark.slow
-def test_a_later_session_relocalises_in_the_stored_map_and_ends_in_its_frame(town_sessions, tmp_path):
-    (a, b), config = town_sessions
-    slam_a, result_a = _drive(a, config, None, tmp_path / "a")
-    stored = slam_a.map_state()
-    slam_b, result = _drive(b, config, stored, tmp_path / "b")
+def test_a_later_session_relocalises_in_the_stored_map_and_ends_in_its_frame(
+    town_sessions, town_session_a, session_driver
+):
+    (a, b), (_, folder_b) = town_sessions.sessions, town_sessions.folders
+    stored, result_a = town_session_a  # A driven alone with the default config
+    state, result = session_driver(folder_b, CONFIG, stored, b.recording.name)
     relocalised = result.session.relocalised_frame
     assert result.session.id == 2 and relocalised is not None and relocalised < 400
     # B's trajectory is in A's frame: where B drives A's streets, B's estimate lies where A's estimate has the same
@@ -66,7 +45,6 @@ def test_a_later_session_relocalises_in_the_stored_map_and_ends_in_its_frame(tow
         gap = truth_in_a[closure.query_frame, :2, 3] - truth_a[closure.match_frame, :2, 3]
         assert np.linalg.norm(gap) < TRUE_PLACE_M
     # The session's keyframes and experiences joined the map with ids after the stored ones.
-    state = slam_b.map_state()
     assert [s.id for s in state.sessions] == [1, 2] and state.sessions[1].relocalised_frame == relocalised
     assert min(k.id for k in result.keyframes) == stored.next_keyframe
     assert {e.session for e in state.experiences[len(stored.experiences) :]} == {2}
@@ -74,15 +52,14 @@ def test_a_later_session_relocalises_in_the_stored_map_and_ends_in_its_frame(tow
 
 
 @pytest.mark.slow
-def test_a_session_in_a_world_the_map_never_saw_never_joins_it(town_sessions, tmp_path):
-    (a, _), config = town_sessions
-    slam_a, _ = _drive(a, config, None, tmp_path / "a")
-    stored = slam_a.map_state()
+def test_a_session_in_a_world_the_map_never_saw_never_joins_it(town_session_a, session_driver, tmp_path):
+    stored, _ = town_session_a  # town session A driven alone with the default config
     poses = stored.experience_poses.copy()
-    other = simulation_config(config, "vo", 9).simulator  # another seed: another world of objects
+    other = simulation_config(CONFIG, "vo", 9).simulator  # another seed: another world of objects
     truth = drive_route(ROUTES["block"], other.frame_period, other.camera.height_above_ground)
     elsewhere = session_recordings(truth, [(0, len(truth))], other, [9], "block")[0]
-    slam_b, result = _drive(elsewhere, config, stored, tmp_path / "b")
+    write_dataset(tmp_path / "b", elsewhere.recording)
+    state, result = session_driver(tmp_path / "b", CONFIG, stored, elsewhere.recording.name)
     assert result.session.relocalised_frame is None
     assert result.loop_closures == result.session_closures()
-    assert np.array_equal(slam_b.map_state().experience_poses[: len(poses)], poses), "the stored part moved"
+    assert np.array_equal(state.experience_poses[: len(poses)], poses), "the stored part moved"

@@ -9,17 +9,13 @@ import gtsam
 import numpy as np
 import pytest
 
-from neoslam.config import ExperienceMapConfig, NeoSLAMConfig, ObjectMapConfig, SimulatorConfig
-from neoslam.config.profiles import simulation_config
-from neoslam.datasets.simulated import read_dataset, write_dataset
+from neoslam.config import ExperienceMapConfig, NeoSLAMConfig, ObjectMapConfig
+from neoslam.datasets.simulated import read_dataset
 from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
 from neoslam.geometry import invert_pose
 from neoslam.mapping.graph import MapGraph
 from neoslam.mapping.landmarks import LandmarkSolver, landmark_key
 from neoslam.pipeline import NeoSLAM
-from neoslam.sim.routes import ROUTES, drive_route
-from neoslam.sim.session_drives import session_recordings
-from neoslam.sim.simulator import simulate_route
 from neoslam.types import Link, ObjectMapState
 
 SIGHT_M = 15.0  # nodes see the objects this close
@@ -127,6 +123,7 @@ def test_landmarks_pull_drifting_odometry_back(biased_square, clean):
     assert len(solver.landmarks) == len(object_positions(biased_square))
 
 
+@pytest.mark.slow
 def test_a_wrong_association_is_down_weighted(biased_square, config, clean):
     """One view of an object placed 3 m off (another object's place): the robust kernel keeps the map."""
     wrong = drive(biased_square, config, wrong=(50, 3, np.array([3.0, 0.0, 0.0])))[0]
@@ -195,10 +192,8 @@ def test_only_the_views_of_left_nodes_are_added(biased_square, config):
 
 
 @pytest.fixture(scope="module")
-def block_frames(tmp_path_factory) -> list:
-    folder = tmp_path_factory.mktemp("block") / "data"
-    write_dataset(folder, simulate_route("block", SimulatorConfig(seed=5)))
-    dataset = read_dataset(folder)
+def block_frames(block_seed5) -> list:
+    dataset = read_dataset(block_seed5)
     return list(dataset.frames()), dataset.ground_truth
 
 
@@ -214,10 +209,12 @@ def run_block(frames, experience_map: dict, source: bool = True):
 
 
 @pytest.mark.slow
-def test_switched_off_the_map_is_todays(block_frames):
+def test_switched_off_the_map_is_todays(block_frames, block_seed5_run):
+    """block_seed5_run is the default config's run: object_landmarks off, the landmark source in place."""
     frames, _ = block_frames
     today = run_block(frames, {"object_landmarks": False}, source=False).estimate.poses
-    assert run_block(frames, {"object_landmarks": False}).estimate.poses.tobytes() == today.tobytes()
+    assert not block_seed5_run.experience_map.backend.uses_landmarks
+    assert block_seed5_run.estimate.poses.tobytes() == today.tobytes()
 
 
 @pytest.mark.slow
@@ -229,41 +226,34 @@ def test_the_relaxation_ignores_the_switch(block_frames):
 
 
 @pytest.mark.slow
-def test_a_run_with_landmarks_is_deterministic_and_no_worse(block_frames):
+def test_a_run_with_landmarks_is_deterministic_and_no_worse(block_frames, block_seed5_run):
     frames, truth = block_frames
     first = run_block(frames, {"object_landmarks": True})
     second = run_block(frames, {"object_landmarks": True})
     assert first.estimate.poses.tobytes() == second.estimate.poses.tobytes()
     assert first.experience_map.backend.uses_landmarks and first.experience_map.backend.seconds > 0
-    off = run_block(frames, {"object_landmarks": False})
+    off = block_seed5_run  # the default config: object_landmarks off
+    assert not off.experience_map.backend.uses_landmarks
     error = absolute_trajectory_error(first.estimate, truth, "se3").rmse
     assert error <= absolute_trajectory_error(off.estimate, truth, "se3").rmse + 0.05
 
 
-def recorded(recording, folder):
-    """A recording's frames, written to a dataset folder and read back as a run reads them."""
-    write_dataset(folder, recording)
-    return read_dataset(folder).frames()
-
-
 @pytest.mark.slow
-def test_a_later_session_rebuilds_the_solver_in_the_joined_map(tmp_path):
+def test_a_later_session_rebuilds_the_solver_in_the_joined_map(town_sessions):
     """Town driven in two sessions with landmarks: the second starts its own part, relocalises in the stored map
     and joins it (a rigid move), after which the solver holds the joined part, stored experiences included."""
     config = NeoSLAMConfig()
     config = config.model_copy(
         update={"experience_map": config.experience_map.model_copy(update={"object_landmarks": True})}
     )
-    sim = simulation_config(config, "vo", 3).simulator
-    truth = drive_route(ROUTES["town"], sim.frame_period, sim.camera.height_above_ground)
-    first, second = session_recordings(truth, [(0, 1800), (1300, len(truth))], sim, [3, 4], "town")
+    first, second = town_sessions.folders  # the sessions' simulator settings are those of this config
     slam = NeoSLAM(config, None, "a")
-    for frame in recorded(first.recording, tmp_path / "a"):
+    for frame in read_dataset(first).frames():
         slam.step(frame)
     stored = slam.map_state()
     stored_experiences = len(stored.experiences)
     slam = NeoSLAM(config, stored, "b")
-    for frame in recorded(second.recording, tmp_path / "b"):
+    for frame in read_dataset(second).frames():
         slam.step(frame)
     result = slam.result(np.zeros(0))
     assert result.session.relocalised_frame is not None

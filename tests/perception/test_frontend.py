@@ -66,6 +66,7 @@ def _spread(track: np.ndarray) -> float:
     return float(np.linalg.norm(track - np.median(track, axis=0), axis=1).max())
 
 
+@pytest.mark.slow
 def test_parked_cars_stay_put_in_the_world(
     mini_sequence: KittiSequence, perception: PerceptionConfig, truth_poses_file: Path
 ) -> None:
@@ -102,6 +103,7 @@ def test_frames_carry_odometry_velocities_and_objects(
     )
 
 
+@pytest.mark.slow
 def test_pose_file_odometry_starts_at_the_identity(
     mini_sequence: KittiSequence, perception: PerceptionConfig, truth_poses_file: Path
 ) -> None:

@@ -9,15 +9,10 @@ import sys
 from pathlib import Path
 
 import pytest
-from typer.testing import CliRunner
-
-from neoslam.cli import app
 
 
-def _simulate(out: Path, seed: int) -> None:
-    result = CliRunner().invoke(app, ["simulate", "--route", "block", "--seed", str(seed), "--out", str(out), "-q"])
-    assert result.exit_code == 0, result.output
-    assert result.exception is None
+def _simulate(cli, out: Path, seed: int) -> None:
+    cli.ok("simulate", "--route", "block", "--seed", seed, "--out", out, "-q")
 
 
 def _executable() -> str:
@@ -30,9 +25,9 @@ def _files(folder: Path) -> dict[str, bytes]:
 
 
 @pytest.fixture(scope="module")
-def seed_3(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def seed_3(cli, tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("seed3") / "A"
-    _simulate(out, 3)
+    _simulate(cli, out, 3)
     return out
 
 
@@ -59,8 +54,8 @@ def test_same_seed_same_bytes(seed_3: Path, tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_other_seed_other_data(seed_3: Path, tmp_path: Path) -> None:
-    _simulate(tmp_path / "C", 4)
+def test_other_seed_other_data(cli, seed_3: Path, tmp_path: Path) -> None:
+    _simulate(cli, tmp_path / "C", 4)
     a, c = _files(seed_3), _files(tmp_path / "C")
     assert set(c) == set(a)
     for name in ("frames.csv", "detections.csv", "patches.npy", "truth/objects.csv"):

@@ -322,9 +322,8 @@ def test_a_session_name_with_a_lone_surrogate_is_written(tmp_path, growth):
 
 
 @pytest.mark.slow
-def test_a_dataset_folder_named_in_bytes_that_are_not_utf8_makes_and_extends_a_map(tmp_path):
-    from cli_runner import ok
-
+def test_a_dataset_folder_named_in_bytes_that_are_not_utf8_makes_and_extends_a_map(cli, tmp_path):
+    ok = cli.ok
     plain = tmp_path / "plain"
     ok("simulate", "--route", "block", "--seed", "2", "--out", plain, "--quiet")
     data = plain.rename(tmp_path / os.fsdecode(b"seq\xff"))

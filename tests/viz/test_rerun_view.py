@@ -13,9 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cli_runner import invoke as _invoke
-from cli_runner import ok as _ok
-
 BLOCK_FRAMES = 600  # the simulated block route to its first revisit: a few loop closures
 PER_FRAME = (
     "camera/detections",
@@ -31,7 +28,7 @@ PER_FRAME = (
 MAP_LAYERS = ("world/trajectory/odometry", "world/trajectory/corrected", "world/objects", "world/keyframes")
 
 
-def _simulate(root: Path, frames: int) -> Path:
+def _simulate(cli, root: Path, frames: int) -> Path:
     from neoslam.config import NeoSLAMConfig
     from neoslam.config.profiles import simulation_config
     from neoslam.io.trajectory_files import write_tum
@@ -41,7 +38,7 @@ def _simulate(root: Path, frames: int) -> Path:
     truth = drive_route(ROUTES["block"], sim.frame_period, sim.camera.height_above_ground)
     write_tum(root / "block.txt", truth.subset(np.arange(frames)))
     args = ("--trajectory", root / "block.txt", "--noise", "vo", "--detector", "ideal", "--seed", 2)
-    _ok("simulate", *args, "--out", root / "data", "-q")
+    cli.ok("simulate", *args, "--out", root / "data", "-q")
     return root / "data"
 
 
@@ -74,14 +71,15 @@ def rerun_module(extra):
 
 
 @pytest.fixture(scope="module")
-def block_run(rerun_module, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, Recording]:
+def block_run(cli, rerun_module, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, Recording]:
     root = tmp_path_factory.mktemp("rerun")
-    data = _simulate(root, BLOCK_FRAMES)
-    _ok("run", data, "--rerun", root / "out" / "block.rrd", "--out", root / "out", "-q")  # in the results folder
+    data = _simulate(cli, root, BLOCK_FRAMES)
+    cli.ok("run", data, "--rerun", root / "out" / "block.rrd", "--out", root / "out", "-q")  # in the results folder
     metrics = json.loads((root / "out" / "metrics.json").read_text())
     return root / "out", metrics, Recording(root / "out" / "block.rrd")
 
 
+@pytest.mark.slow
 def test_every_frame_is_logged_on_both_timelines(block_run) -> None:
     _, metrics, recording = block_run
     assert metrics["frames"] == BLOCK_FRAMES and metrics["loops"]["accepted"] > 0
@@ -92,6 +90,7 @@ def test_every_frame_is_logged_on_both_timelines(block_run) -> None:
     assert "camera/image" not in recording.rows  # a simulated dataset has no images
 
 
+@pytest.mark.slow
 def test_the_map_layers_end_with_the_final_map(block_run) -> None:
     out, metrics, recording = block_run
     for entity in (*MAP_LAYERS, "world/loop_closures"):
@@ -107,6 +106,7 @@ def test_the_map_layers_end_with_the_final_map(block_run) -> None:
     assert last["metrics/loop_closures"]["Scalars:scalars"] == [metrics["loops"]["accepted"]]
 
 
+@pytest.mark.slow
 def test_the_results_folder_holds_the_pose_graph(block_run) -> None:
     out, metrics, _ = block_run
     lines = (out / "experience_map.g2o").read_text().splitlines()
@@ -114,11 +114,12 @@ def test_the_results_folder_holds_the_pose_graph(block_run) -> None:
     assert sum(line.startswith("EDGE_SE3:QUAT ") for line in lines) == metrics["experience_map"]["links"]
 
 
-def test_an_image_sequence_logs_its_left_images(rerun_module, shared_data: Path, tmp_path: Path) -> None:
+@pytest.mark.slow
+def test_an_image_sequence_logs_its_left_images(cli, rerun_module, shared_data: Path, tmp_path: Path) -> None:
     model = shared_data / "models" / "yolox_nano_coco" / "yolox_nano.onnx"
     env = {"NEOSLAM_PERCEPTION__DETECTOR__MODEL": str(model)}
     root = shared_data / "kitti_mini"
-    _ok("run", root, "--sequence", "06", "--out", tmp_path / "out", "--rerun", tmp_path / "mini.rrd", "-q", env=env)
+    cli.ok("run", root, "--sequence", "06", "--out", tmp_path / "out", "--rerun", tmp_path / "mini.rrd", "-q", env=env)
     recording = Recording(tmp_path / "mini.rrd")
     assert recording.rows["camera/image"] == recording.rows["camera/detections"] == 12
     image = recording.last["camera/image"][1]
@@ -127,7 +128,8 @@ def test_an_image_sequence_logs_its_left_images(rerun_module, shared_data: Path,
     assert all(label.split()[0] in ("car", "truck", "bicycle", "person") for label in labels)
 
 
-def test_a_bare_rerun_spawns_the_viewer(rerun_module, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.slow
+def test_a_bare_rerun_spawns_the_viewer(cli, rerun_module, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     spawned = []
     monkeypatch.setattr(rerun_module.RecordingStream, "spawn", lambda self, **kwargs: spawned.append(kwargs))
     viewer = tmp_path / "bin" / "rerun"  # a stand-in for the viewer executable, found on PATH
@@ -135,35 +137,33 @@ def test_a_bare_rerun_spawns_the_viewer(rerun_module, tmp_path: Path, monkeypatc
     viewer.write_text("#!/bin/sh\n")
     viewer.chmod(0o755)
     monkeypatch.setenv("PATH", f"{viewer.parent}{os.pathsep}{os.environ.get('PATH', '')}")
-    data = _simulate(tmp_path, 30)
-    _ok("run", data, "--out", tmp_path / "out", "--rerun", "-q")
-    _ok("run", data, "--rerun", "--out", tmp_path / "out2", "-q")  # DATA before it is not taken as the file
+    data = _simulate(cli, tmp_path, 30)
+    cli.ok("run", data, "--out", tmp_path / "out", "--rerun", "-q")
+    cli.ok("run", data, "--rerun", "--out", tmp_path / "out2", "-q")  # DATA before it is not taken as the file
     assert len(spawned) == 2
 
 
 def test_without_the_viewer_executable_a_bare_rerun_says_how_to_get_it(
-    rerun_module, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    cli, rerun_module, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setenv("PATH", str(tmp_path / "empty"))
-    data = _simulate(tmp_path, 30)
-    result = _invoke("run", data, "--rerun", "--out", tmp_path / "out", "-q")
-    assert result.exit_code == 2
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and "Rerun viewer (`rerun`) is not on PATH" in lines[0] and "--rerun FILE.rrd" in lines[0]
-    assert not (tmp_path / "out").exists()
+    data = _simulate(cli, tmp_path, 30)
+    result = cli.invoke("run", data, "--rerun", "--out", tmp_path / "out", "-q")
+    line = cli.one_line_error(result, "Rerun viewer (`rerun`) is not on PATH", "--rerun FILE.rrd")
+    assert line and not (tmp_path / "out").exists()
 
 
-def test_a_recording_must_end_in_rrd(rerun_module, tmp_path: Path) -> None:
-    result = _invoke("run", tmp_path / "nowhere", "--rerun=notes.txt", "--out", tmp_path / "out", "-q")
+def test_a_recording_must_end_in_rrd(cli, rerun_module, tmp_path: Path) -> None:
+    result = cli.invoke("run", tmp_path / "nowhere", "--rerun=notes.txt", "--out", tmp_path / "out", "-q")
     assert result.exit_code == 2
     assert result.stderr.strip().splitlines() == ["neoslam: error: --rerun takes no value (spawn the viewer) or a "
                                                   "file ending .rrd, not 'notes.txt'"]  # fmt: skip
 
 
-def test_without_the_viewer_extra_rerun_says_how_to_install_it(tmp_path: Path, monkeypatch) -> None:
+def test_without_the_viewer_extra_rerun_says_how_to_install_it(cli, tmp_path: Path, monkeypatch) -> None:
     monkeypatch.setitem(sys.modules, "rerun", None)  # import rerun now fails as if it were not installed
-    data = _simulate(tmp_path, 30)
-    result = _invoke("run", data, "--rerun", tmp_path / "run.rrd", "--out", tmp_path / "out", "-q")
+    data = _simulate(cli, tmp_path, 30)
+    result = cli.invoke("run", data, "--rerun", tmp_path / "run.rrd", "--out", tmp_path / "out", "-q")
     assert result.exit_code == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and 'pip install "neoslam[viewer]"' in lines[0]

@@ -11,14 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cli_runner import invoke as _invoke
-from cli_runner import ok as _ok
 from neoslam.io.trajectory_files import read_trajectory, write_tum
 
 pytestmark = pytest.mark.slow  # every test here runs whole drives, real images or real bags
 
 FRAMES = 30  # the first keyframes of the street come at frames 22 and 27
-EPOCH_S = 1_317_384_000  # tests/bags/conftest.py: the bags' stamps are KITTI's times from this second on
+EPOCH_S = 1_317_384_000  # tests/datasets/bags/conftest.py: the bags' stamps are KITTI's times from this second on
 SAME_BYTES = ("objects.csv", "loop_closures.csv", "experience_map.g2o", "trajectory_kitti.txt", "odometry_kitti.txt")
 
 
@@ -27,7 +25,7 @@ def _model_env(shared_data: Path) -> dict[str, str]:
 
 
 @pytest.fixture(scope="module")
-def runs(street, stereo_bag, kitti_subset, shared_data: Path, tmp_path_factory: pytest.TempPathFactory):
+def runs(cli, street, stereo_bag, kitti_subset, shared_data: Path, tmp_path_factory: pytest.TempPathFactory):
     """The KITTI subset and the three bags of it, each run with the built-in detector and stereo odometry."""
     root = tmp_path_factory.mktemp("bag_runs")
     env = _model_env(shared_data)
@@ -38,9 +36,9 @@ def runs(street, stereo_bag, kitti_subset, shared_data: Path, tmp_path_factory: 
         "mcap": stereo_bag(root / "drive_mcap", street, FRAMES, "mcap"),
     }
     outs = {name: root / f"out_{name}" for name in inputs}
-    _ok("run", inputs["kitti"], "--sequence", "06", "--out", outs["kitti"], "-q", env=env)
+    cli.ok("run", inputs["kitti"], "--sequence", "06", "--out", outs["kitti"], "-q", env=env)
     for name in ("ros1", "sqlite3", "mcap"):
-        _ok("run", inputs[name], "--out", outs[name], "-q", env=env)
+        cli.ok("run", inputs[name], "--out", outs[name], "-q", env=env)
     return inputs, outs
 
 
@@ -65,17 +63,17 @@ def test_a_bag_runs_as_its_kitti_folder(runs, bag: str) -> None:
     assert "ate_rmse_m" not in got  # a bag carries no ground truth
 
 
-def test_detect_reads_a_bag_as_its_kitti_folder(runs, shared_data: Path, tmp_path: Path) -> None:
+def test_detect_reads_a_bag_as_its_kitti_folder(cli, runs, shared_data: Path, tmp_path: Path) -> None:
     inputs, _ = runs
     env = _model_env(shared_data)
-    _ok("detect", inputs["kitti"], "--sequence", "06", "--out", tmp_path / "kitti.jsonl", "-q", env=env)
-    result = _ok("detect", inputs["ros1"], "--out", tmp_path / "bag.jsonl", "-q", env=env)
+    cli.ok("detect", inputs["kitti"], "--sequence", "06", "--out", tmp_path / "kitti.jsonl", "-q", env=env)
+    result = cli.ok("detect", inputs["ros1"], "--out", tmp_path / "bag.jsonl", "-q", env=env)
     assert f"in {FRAMES} frames" in result.stdout
     assert (tmp_path / "bag.jsonl").read_text() == (tmp_path / "kitti.jsonl").read_text()
 
 
 def test_the_odometry_topic_moves_the_robot_as_a_pose_file_does(
-    runs, street, stereo_bag, shared_data: Path, tmp_path: Path
+    cli, runs, street, stereo_bag, shared_data: Path, tmp_path: Path
 ) -> None:
     """The ground truth as a TUM file (--odometry) and, read back from it, as the bag's nav_msgs/Odometry topic."""
     inputs, _ = runs
@@ -85,16 +83,16 @@ def test_the_odometry_topic_moves_the_robot_as_a_pose_file_does(
     bag = stereo_bag(tmp_path / "odom", street, FRAMES, "mcap", odometry=poses)
     bag_file = bag / "odom.mcap"  # a bare .mcap file is a bag too
     env = _model_env(shared_data)
-    _ok("detect", inputs["kitti"], "--sequence", "06", "--out", tmp_path / "dets.jsonl", "-q", env=env)
+    cli.ok("detect", inputs["kitti"], "--sequence", "06", "--out", tmp_path / "dets.jsonl", "-q", env=env)
     common = ("--detections", tmp_path / "dets.jsonl", "-q")
-    _ok("run", inputs["kitti"], "--sequence", "06", "--odometry", truth_file, "--out", tmp_path / "k", *common)
-    _ok("run", bag_file, "--odometry-topic", "/odom", "--out", tmp_path / "b", *common)
+    cli.ok("run", inputs["kitti"], "--sequence", "06", "--odometry", truth_file, "--out", tmp_path / "k", *common)
+    cli.ok("run", bag_file, "--odometry-topic", "/odom", "--out", tmp_path / "b", *common)
     _assert_same_trajectory(tmp_path / "k" / "odometry_tum.txt", tmp_path / "b" / "odometry_tum.txt")
     _assert_same_trajectory(tmp_path / "k" / "trajectory_tum.txt", tmp_path / "b" / "trajectory_tum.txt")
     assert (tmp_path / "b" / "objects.csv").read_text() == (tmp_path / "k" / "objects.csv").read_text()
     # perception.odometry.source: poses finds the bag's only odometry topic by itself
     env = {"NEOSLAM_PERCEPTION__ODOMETRY__SOURCE": "poses"}
-    _ok("run", bag_file, "--out", tmp_path / "auto", *common, env=env)
+    cli.ok("run", bag_file, "--out", tmp_path / "auto", *common, env=env)
     auto = (tmp_path / "auto" / "odometry_tum.txt").read_text()
     assert auto == (tmp_path / "b" / "odometry_tum.txt").read_text()
 
@@ -170,15 +168,15 @@ def _broken(kind: str, folder: Path, street, stereo_bag, bag_writer) -> Path:
     ],
 )
 def test_a_bag_that_cannot_be_used_is_one_line(
-    kind, args, expected, street, stereo_bag, bag_writer, tmp_path: Path
+    cli, kind, args, expected, street, stereo_bag, bag_writer, tmp_path: Path
 ) -> None:
     bag = _broken(kind, tmp_path, street, stereo_bag, bag_writer)
-    result = _invoke("run", bag, *args, "--out", tmp_path / "out", "-q")
+    result = cli.invoke("run", bag, *args, "--out", tmp_path / "out", "-q")
     _assert_one_line_error(result, expected)
     assert not (tmp_path / "out").exists()
 
 
-def test_topic_options_need_a_bag(runs, tmp_path: Path) -> None:
+def test_topic_options_need_a_bag(cli, runs, tmp_path: Path) -> None:
     inputs, _ = runs
-    result = _invoke("run", inputs["kitti"], "--sequence", "06", "--left-topic", "/a", "--out", tmp_path / "o")
+    result = cli.invoke("run", inputs["kitti"], "--sequence", "06", "--left-topic", "/a", "--out", tmp_path / "o")
     _assert_one_line_error(result, ["--left-topic, --right-topic and --odometry-topic apply to ROS bags only"])
