@@ -107,6 +107,11 @@ class DetectorConfig(Section):
     )
     contrast_tiles: int = Field(8, gt=0, le=64, description="CLAHE tiles across each side of the image")
     threads: int = Field(2, gt=0, le=64, description="onnxruntime intra-op threads")
+    device: Literal["cpu", "cuda"] = Field(
+        "cpu",
+        description="where the network runs: cpu, or cuda (onnxruntime's CUDA execution provider, from the "
+        'optional gpu extra: pip install "neoslam[gpu]"; refused in one line when it is not available)',
+    )
 
     def model_path(self) -> Path:
         """The configured model, else the source's default under $NEOSLAM_DATA."""

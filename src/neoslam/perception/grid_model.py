@@ -42,7 +42,7 @@ class GridModel:
 
     def __init__(self, config: DetectorConfig) -> None:
         model = self.model_path = config.model_path()
-        self.session = open_session(model, config.threads, self.help_text, self.session_entries)
+        self.session = open_session(model, config.threads, self.help_text, self.session_entries, config.device)
         self.class_names = load_class_names(model, config.labels_file, LABELS_FILE_NAME)
         self._input_name = self.session.get_inputs()[0].name
         given = self._classes_given(self.session.get_outputs()[0].shape)

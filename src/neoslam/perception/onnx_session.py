@@ -13,10 +13,10 @@ from pathlib import Path
 import onnx
 import onnxruntime as ort
 
-from neoslam.errors import InputError
+from neoslam.errors import ConfigError, InputError
 from neoslam.inputs import MAX_MODEL_BYTES, check_input_file
 
-__all__ = ["free_input_size", "open_session"]
+__all__ = ["execution_providers", "free_input_size", "open_session"]
 
 HEIGHT_AXIS, WIDTH_AXIS = 2, 3  # of an NCHW image input
 
@@ -39,11 +39,29 @@ def free_input_size(model: onnx.ModelProto) -> onnx.ModelProto:
     return model
 
 
+PROVIDERS = {"cpu": "CPUExecutionProvider", "cuda": "CUDAExecutionProvider"}
+# onnxruntime-gpu provides the same `onnxruntime` module as the CPU build: it replaces it, not joins it
+GPU_EXTRA = 'pip uninstall onnxruntime && pip install "neoslam[gpu]"'
+
+
+def execution_providers(device: str, available: list[str]) -> list[str]:
+    """onnxruntime's providers for `device`, best first (the CPU provider last, for the operators a GPU provider
+    leaves to it); ConfigError naming the extra when the device's provider is not among `available`."""
+    wanted = PROVIDERS[device]
+    if wanted not in available:
+        raise ConfigError(
+            f"perception.detector.device is {device!r}, but onnxruntime here has no {wanted} (it has "
+            f"{', '.join(available) or 'none'}); install the GPU build with {GPU_EXTRA}, or set device: cpu"
+        )
+    return [wanted] if wanted == PROVIDERS["cpu"] else [wanted, PROVIDERS["cpu"]]
+
+
 def open_session(
-    path: Path, threads: int, help_text: str, entries: dict[str, str] | None = None
+    path: Path, threads: int, help_text: str, entries: dict[str, str] | None = None, device: str = "cpu"
 ) -> ort.InferenceSession:
-    """An onnxruntime CPU session of the model at `path` with a free input size; one line naming the file when
-    the model is missing or cannot be loaded."""
+    """An onnxruntime session of the model at `path` with a free input size, on `device` (cpu or cuda); one line
+    naming the file when the model is missing or cannot be loaded, or the extra when the device is not there."""
+    providers = execution_providers(device, ort.get_available_providers())
     check_input_file(path, f"detector model not found: {help_text}", MAX_MODEL_BYTES)
     try:
         model = free_input_size(onnx.load(str(path)))
@@ -61,6 +79,6 @@ def open_session(
     for key, value in (entries or {}).items():
         options.add_session_config_entry(key, value)
     try:
-        return ort.InferenceSession(model.SerializeToString(), options, providers=["CPUExecutionProvider"])
+        return ort.InferenceSession(model.SerializeToString(), options, providers=providers)
     except Exception as error:  # onnxruntime's load errors derive from Exception only (InvalidGraph, ...)
         raise InputError(path, f"cannot load the ONNX model ({error}); {help_text}") from error
