@@ -238,3 +238,11 @@ class PerceptionConfig(Section):
     stereo: StereoObjectConfig = StereoObjectConfig()
     odometry: StereoOdometryConfig = StereoOdometryConfig()
     bag: BagConfig = BagConfig()
+    pipeline_depth: int = Field(
+        2,
+        ge=0,
+        le=64,
+        description="frames read and detected ahead of the one being placed in 3-D and tracked, each stage in a "
+        "thread of its own (onnxruntime and OpenCV release the GIL); the frames and their order are the same as "
+        "one at a time; 0: one frame at a time",
+    )

@@ -21,14 +21,24 @@ from neoslam.errors import ConfigError, InputError
 from neoslam.geometry import body_velocities, camera_poses_to_robot, invert_pose
 from neoslam.io.motion_limits import check_pose_steps
 from neoslam.io.trajectory_files import data_line_numbers, read_trajectory
-from neoslam.perception.detection import ObjectDetector
+from neoslam.perception.detection import Detection, ObjectDetector
 from neoslam.perception.detections_file import DetectionsFile
 from neoslam.perception.detector import make_detector
 from neoslam.perception.odometry import StereoOdometry
+from neoslam.perception.pipelined import staged
 from neoslam.perception.stereo import ObjectTriangulator
 from neoslam.types import Frame, ObjectObservation, Trajectory
 
-__all__ = ["StereoSequence", "MotionSource", "PerceptionTimes", "StereoFrontEnd", "ImageDataset", "open_front_end"]
+__all__ = [
+    "StereoSequence",
+    "MotionSource",
+    "PerceptionTimes",
+    "StereoPair",
+    "DetectedPair",
+    "StereoFrontEnd",
+    "ImageDataset",
+    "open_front_end",
+]
 
 STAGES = ("read", "detection", "stereo", "odometry")
 
@@ -77,6 +87,24 @@ class PoseFileMotion:
         return self.poses[frame_index]
 
 
+@dataclass(frozen=True, slots=True)
+class StereoPair:
+    """One rectified stereo pair of a sequence, as read."""
+
+    index: int
+    timestamp: float
+    left: np.ndarray
+    right: np.ndarray
+
+
+@dataclass(frozen=True, slots=True)
+class DetectedPair:
+    """A stereo pair with the detections of its left image."""
+
+    pair: StereoPair
+    detections: list[Detection]
+
+
 @dataclass
 class PerceptionTimes:
     """Wall time of each front-end stage, per frame, seconds."""
@@ -117,7 +145,16 @@ class StereoFrontEnd:
 
     def frame(self, index: int, timestamp: float, left: np.ndarray, right: np.ndarray) -> Frame:
         """The frame of one rectified stereo pair (paper 3.1: objects in the camera frame, robot pose, velocities)."""
-        detections = self._timed("detection", self.detector.detect, index, left)
+        return self.placed(self.detected(StereoPair(index, timestamp, left, right)))
+
+    def detected(self, pair: StereoPair) -> DetectedPair:
+        """Objects detected in the pair's left image."""
+        return DetectedPair(pair, self._timed("detection", self.detector.detect, pair.index, pair.left))
+
+    def placed(self, detected: DetectedPair) -> Frame:
+        """The detected objects placed in 3-D and the robot moved by the pair: the frame (after `detected`)."""
+        pair, detections = detected.pair, detected.detections
+        index, timestamp, left, right = pair.index, pair.timestamp, pair.left, pair.right
         observations: list[ObjectObservation] = self._timed(
             "stereo", self.triangulator.observe, left, right, detections
         )
@@ -137,6 +174,7 @@ class ImageDataset:
 
     sequence: StereoSequence
     front_end: StereoFrontEnd
+    pipeline_depth: int = 0  # frames read and detected ahead in threads (perception.pipeline_depth); 0: none
 
     @property
     def name(self) -> str:
@@ -149,12 +187,22 @@ class ImageDataset:
     def __len__(self) -> int:
         return len(self.sequence)
 
-    def frames(self) -> Iterator[Frame]:
+    def _pairs(self) -> Iterator[StereoPair]:
         for index, timestamp in enumerate(self.sequence.timestamps):
             start = time.perf_counter()
             left, right = self.sequence.stereo_pair(index)
             self.front_end.times.add("read", time.perf_counter() - start)
-            yield self.front_end.frame(index, float(timestamp), left, right)
+            yield StereoPair(index, float(timestamp), left, right)
+
+    def frames(self) -> Iterator[Frame]:
+        """The frames in order; with a pipeline depth, reading and detection run ahead in threads of their own."""
+        front_end = self.front_end
+        if self.pipeline_depth == 0:
+            for pair in self._pairs():
+                yield front_end.placed(front_end.detected(pair))
+            return
+        for detected in staged(self._pairs(), [front_end.detected], self.pipeline_depth):
+            yield front_end.placed(detected)
 
 
 def _detections_file(path: Path, config: PerceptionConfig, frames: int) -> DetectionsFile:
@@ -198,4 +246,4 @@ def open_front_end(
     else:
         motion = StereoMotion(StereoOdometry(sequence.camera, config.odometry))
     triangulator = ObjectTriangulator(sequence.camera, config.stereo)
-    return ImageDataset(sequence, StereoFrontEnd(triangulator, detector, motion))
+    return ImageDataset(sequence, StereoFrontEnd(triangulator, detector, motion), config.pipeline_depth)
