@@ -17,7 +17,7 @@ import os
 import signal
 import sys
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager, suppress
+from contextlib import AbstractContextManager, contextmanager, suppress
 from itertools import count
 
 __all__ = ["STOP_SIGNALS", "install", "installed", "on_stop", "stop_note"]
@@ -25,8 +25,8 @@ __all__ = ["STOP_SIGNALS", "install", "installed", "on_stop", "stop_note"]
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 DEFAULT_NOTE = "no output written"
 
-_cleanups: dict[int, Callable[[], None]] = {}
-_notes: dict[int, Callable[[], str | None]] = {}
+_cleanups: dict[int, Callable[[], object]] = {}
+_notes: dict[int, Callable[[], object]] = {}
 _ids = count()
 _installed = False
 
@@ -45,26 +45,24 @@ def install() -> None:
 
 
 @contextmanager
-def on_stop(cleanup: Callable[[], None]) -> Iterator[None]:
-    """Run `cleanup` if the command is stopped while the body runs (latest first, with the others registered)."""
+def _registered(table: dict[int, Callable[[], object]], entry: Callable[[], object]) -> Iterator[None]:
     key = next(_ids)
-    _cleanups[key] = cleanup
+    table[key] = entry
     try:
         yield
     finally:
-        _cleanups.pop(key, None)
+        table.pop(key, None)
 
 
-@contextmanager
-def stop_note(note: Callable[[], str | None]) -> Iterator[None]:
+def on_stop(cleanup: Callable[[], None]) -> AbstractContextManager[None]:
+    """Run `cleanup` if the command is stopped while the body runs (latest first, with the others registered)."""
+    return _registered(_cleanups, cleanup)
+
+
+def stop_note(note: Callable[[], str | None]) -> AbstractContextManager[None]:
     """While the body runs, a stop prints `note()` after the reason instead of "no output written" (None: keep it):
     what a stopped command leaves, such as a sweep's finished cells."""
-    key = next(_ids)
-    _notes[key] = note
-    try:
-        yield
-    finally:
-        _notes.pop(key, None)
+    return _registered(_notes, note)
 
 
 def _stop(signum: int, _frame: object) -> None:
