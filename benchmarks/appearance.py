@@ -48,20 +48,16 @@ real patch of a car changes with the view, the simulated one does not.
 from __future__ import annotations
 
 import itertools
-import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 import cv2
 import numpy as np
 from scipy.stats import rankdata
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import neoslam.sim.world as sim_world  # noqa: E402
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from _street import (  # noqa: E402
+import neoslam.sim.world as sim_world
+from benchmarks._street import (
     ASSOCIATION_RADIUS,
     ASSOCIATION_SIGMAS,
     MIN_REPEATS,
@@ -71,15 +67,16 @@ from _street import (  # noqa: E402
     depth_sigma,
     to_world,
 )
-from neoslam.config import NeoSLAMConfig, SimulatorConfig  # noqa: E402
-from neoslam.datasets.kitti import KittiSequence, read_kitti_sequence  # noqa: E402
-from neoslam.datasets.replay import ReplayedSequence, forward_back_forward  # noqa: E402
-from neoslam.jobs import simulation_config  # noqa: E402
-from neoslam.perception.frontend import open_front_end  # noqa: E402
-from neoslam.sim.simulator import simulate  # noqa: E402
-from neoslam.types import Frame, Trajectory  # noqa: E402
-from real_streets import THIRD_PASS  # noqa: E402
-from sim2real import ODOMETRY, _street_poses  # noqa: E402
+from benchmarks.harness import data_root, markdown_table
+from benchmarks.real_streets import THIRD_PASS
+from neoslam.config import NeoSLAMConfig, SimulatorConfig
+from neoslam.datasets.kitti import KittiSequence, read_kitti_sequence
+from neoslam.datasets.replay import ReplayedSequence, forward_back_forward
+from neoslam.jobs import simulation_config
+from neoslam.perception.frontend import open_front_end
+from neoslam.sim.simulator import simulate
+from neoslam.types import Frame, Trajectory
+from sim2real import ODOMETRY, _street_poses
 
 LABEL = "car"  # the matcher compares patches within a label; the street's objects are almost all cars
 SEEDS, QUICK_SEEDS = [1, 2, 3, 4, 5], [1, 2]

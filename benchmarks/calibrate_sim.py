@@ -32,15 +32,12 @@ a `--config` file).
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import REPO_ROOT, data_root, markdown_table, parse_args, write_json  # noqa: E402
-from _street import (  # noqa: E402
+from benchmarks._street import (
     MIN_REPEATS,
     RealRun,
     along_and_lateral,
@@ -48,10 +45,11 @@ from _street import (  # noqa: E402
     run_real_front_end,
     to_world,
 )
-from neoslam.config import DetectionNoiseConfig, NeoSLAMConfig, WorldConfig  # noqa: E402
-from neoslam.sim.detections import DetectionSimulator  # noqa: E402
-from neoslam.sim.visibility import column_offset  # noqa: E402
-from neoslam.sim.world import CLASS_SIZES, KERB_EXTRA, World  # noqa: E402
+from benchmarks.harness import REPO_ROOT, data_root, markdown_table
+from neoslam.config import DetectionNoiseConfig, NeoSLAMConfig, WorldConfig
+from neoslam.sim.detections import DetectionSimulator
+from neoslam.sim.visibility import column_offset
+from neoslam.sim.world import CLASS_SIZES, KERB_EXTRA, World
 
 LABELS = REPO_ROOT / "tests" / "data" / "labels" / "kitti_06_51.json"
 DEPTH_EDGES = (1.0, 15.0, 25.0, 40.0, 60.0)  # m, bins of the detection-probability table

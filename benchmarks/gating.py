@@ -24,20 +24,18 @@ trap. Ground truth is read for judging only.
 
 from __future__ import annotations
 
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from neoslam.config import NeoSLAMConfig, load_config  # noqa: E402
-from neoslam.datasets.simulated import read_dataset, write_dataset  # noqa: E402
-from neoslam.errors import InputError  # noqa: E402
-from neoslam.evaluation.report import loop_metrics  # noqa: E402
-from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error  # noqa: E402
-from neoslam.jobs import record, simulation_config  # noqa: E402
-from neoslam.pipeline import run  # noqa: E402
+from benchmarks.harness import data_root, markdown_table
+from neoslam.config import NeoSLAMConfig, load_config
+from neoslam.datasets.simulated import read_dataset, write_dataset
+from neoslam.errors import InputError
+from neoslam.evaluation.report import loop_metrics
+from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
+from neoslam.jobs import record, simulation_config
+from neoslam.pipeline import run
 
 SEQUENCES = ["00", "02", "05", "06", "08"]
 PROFILES = ["vo", "heavy"]

@@ -26,14 +26,12 @@ noisy `heavy` odometry is.
 from __future__ import annotations
 
 import statistics
-import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from _sweep import SPECS, run_spec, sweep_options, with_changes  # noqa: E402
-from neoslam.sim.profiles import DETECTION_PROFILES  # noqa: E402
-from neoslam.sweep import load_spec  # noqa: E402
+from benchmarks._sweep import SPECS, run_spec, sweep_options, with_changes
+from benchmarks.harness import data_root, markdown_table
+from neoslam.sim.profiles import DETECTION_PROFILES
+from neoslam.sweep import load_spec
 
 SEQUENCES = ["00", "02", "05", "06", "07", "08"]
 PROFILES = ["vo", "heavy"]

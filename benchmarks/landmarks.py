@@ -21,16 +21,15 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from neoslam.config import NeoSLAMConfig, load_config  # noqa: E402
-from neoslam.datasets.simulated import read_dataset, write_dataset  # noqa: E402
-from neoslam.evaluation.loops import LoopCriteria, judge_closures  # noqa: E402
-from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error  # noqa: E402
-from neoslam.io.trajectory_files import read_trajectory  # noqa: E402
-from neoslam.jobs import simulation_config  # noqa: E402
-from neoslam.pipeline import NeoSLAM  # noqa: E402
-from neoslam.sim.simulator import simulate  # noqa: E402
+from benchmarks.harness import data_root, markdown_table
+from neoslam.config import NeoSLAMConfig, load_config
+from neoslam.datasets.simulated import read_dataset, write_dataset
+from neoslam.evaluation.loops import LoopCriteria, judge_closures
+from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
+from neoslam.io.trajectory_files import read_trajectory
+from neoslam.jobs import simulation_config
+from neoslam.pipeline import NeoSLAM
+from neoslam.sim.simulator import simulate
 
 SEQUENCES = ["05", "08", "00", "06"]
 DETECTORS = ["real", "ideal"]

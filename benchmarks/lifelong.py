@@ -18,7 +18,6 @@ median milliseconds per frame over the drive and per pass, and the accepted clos
 from __future__ import annotations
 
 import resource
-import sys
 import tempfile
 import time
 from multiprocessing import get_context
@@ -26,19 +25,18 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from neoslam.config import load_config  # noqa: E402
-from neoslam.datasets.simulated import read_dataset, write_dataset  # noqa: E402
-from neoslam.evaluation.loops import LoopCriteria, judge_closures  # noqa: E402
-from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error  # noqa: E402
-from neoslam.io.trajectory_files import read_trajectory  # noqa: E402
-from neoslam.jobs import simulation_config  # noqa: E402
-from neoslam.pipeline import NeoSLAM  # noqa: E402
-from neoslam.sim.passes import join_passes  # noqa: E402
-from neoslam.sim.routes import ROUTES, drive_route  # noqa: E402
-from neoslam.sim.simulator import simulate  # noqa: E402
-from neoslam.types import Trajectory  # noqa: E402
+from benchmarks.harness import data_root, markdown_table
+from neoslam.config import load_config
+from neoslam.datasets.simulated import read_dataset, write_dataset
+from neoslam.evaluation.loops import LoopCriteria, judge_closures
+from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
+from neoslam.io.trajectory_files import read_trajectory
+from neoslam.jobs import simulation_config
+from neoslam.pipeline import NeoSLAM
+from neoslam.sim.passes import join_passes
+from neoslam.sim.routes import ROUTES, drive_route
+from neoslam.sim.simulator import simulate
+from neoslam.types import Trajectory
 
 PASSES = [1, 2, 4]
 

@@ -17,23 +17,20 @@ The machine should be otherwise idle: speed figures of a loaded 2-core machine a
 
 from __future__ import annotations
 
-import sys
 import time
-from pathlib import Path
 
 import cv2
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import REPO_ROOT, data_root, markdown_table, parse_args, write_json  # noqa: E402
-from neoslam.config import NeoSLAMConfig  # noqa: E402
-from neoslam.datasets.kitti import read_kitti_sequence  # noqa: E402
-from neoslam.evaluation.detection import detection_stats, match_frame, read_labels  # noqa: E402
-from neoslam.geometry import yaw_of  # noqa: E402
-from neoslam.perception.config import DetectionPass, DetectorConfig  # noqa: E402
-from neoslam.perception.detector import make_detector  # noqa: E402
-from neoslam.perception.frontend import STAGES, open_front_end  # noqa: E402
-from neoslam.types import Trajectory  # noqa: E402
+from benchmarks.harness import REPO_ROOT, data_root, markdown_table
+from neoslam.config import NeoSLAMConfig
+from neoslam.datasets.kitti import read_kitti_sequence
+from neoslam.evaluation.detection import detection_stats, match_frame, read_labels
+from neoslam.geometry import yaw_of
+from neoslam.perception.config import DetectionPass, DetectorConfig
+from neoslam.perception.detector import make_detector
+from neoslam.perception.frontend import STAGES, open_front_end
+from neoslam.types import Trajectory
 
 LABELS = REPO_ROOT / "tests" / "data" / "labels"
 MIN_IOU = 0.4

@@ -18,20 +18,16 @@ of NeoSLAM), with YOLO11n.
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from neoslam.config import NeoSLAMConfig  # noqa: E402
-from neoslam.datasets.kitti import read_kitti_sequence  # noqa: E402
-from neoslam.datasets.replay import PhotometricChange, forward_back_forward  # noqa: E402
-from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error  # noqa: E402
-from neoslam.geometry import invert_pose  # noqa: E402
-from neoslam.perception.frontend import open_front_end  # noqa: E402
-from neoslam.pipeline import run  # noqa: E402
+from benchmarks.harness import data_root, markdown_table
+from neoslam.config import NeoSLAMConfig
+from neoslam.datasets.kitti import read_kitti_sequence
+from neoslam.datasets.replay import PhotometricChange, forward_back_forward
+from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
+from neoslam.geometry import invert_pose
+from neoslam.perception.frontend import open_front_end
+from neoslam.pipeline import run
 
 THIRD_PASS = PhotometricChange(gain=0.8, offset=15.0, noise_sigma=3.0, blur_sigma=0.7, shift_x=1.3, shift_y=-0.8)
 TRUE_CLOSURE_M = 5.0

@@ -60,23 +60,22 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from neoslam.config import NeoSLAMConfig, SimulatorConfig, load_config  # noqa: E402
-from neoslam.datasets.kitti import read_kitti_sequence  # noqa: E402
-from neoslam.datasets.kitti_writer import write_kitti_sequence  # noqa: E402
-from neoslam.datasets.replay import ReplayedSequence  # noqa: E402
-from neoslam.datasets.simulated import read_dataset  # noqa: E402
-from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error, align, associate  # noqa: E402
-from neoslam.geometry import SimilarityTransform, invert_pose, yaw_pitch_roll  # noqa: E402
-from neoslam.io.trajectory_files import read_trajectory, read_tum  # noqa: E402
-from neoslam.jobs import simulate_dataset, simulation_config  # noqa: E402
-from neoslam.pipeline import run  # noqa: E402
-from neoslam.sim.sessions import session_recordings  # noqa: E402
-from neoslam.store.map_file import MapFile  # noqa: E402
-from neoslam.store.session import MapRecorder  # noqa: E402
-from neoslam.types import Trajectory  # noqa: E402
-from real_streets import THIRD_PASS  # noqa: E402
+from benchmarks.harness import data_root, markdown_table
+from benchmarks.real_streets import THIRD_PASS
+from neoslam.config import NeoSLAMConfig, SimulatorConfig, load_config
+from neoslam.datasets.kitti import read_kitti_sequence
+from neoslam.datasets.kitti_writer import write_kitti_sequence
+from neoslam.datasets.replay import ReplayedSequence
+from neoslam.datasets.simulated import read_dataset
+from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error, align, associate
+from neoslam.geometry import SimilarityTransform, invert_pose, yaw_pitch_roll
+from neoslam.io.trajectory_files import read_trajectory, read_tum
+from neoslam.jobs import simulate_dataset, simulation_config
+from neoslam.pipeline import run
+from neoslam.sim.sessions import session_recordings
+from neoslam.store.map_file import MapFile
+from neoslam.store.session import MapRecorder
+from neoslam.types import Trajectory
 
 MAX_ATTEMPTS_PER_KILL = 3  # runs started per kill wanted, at most (a run may end before its moment)
 SPLIT = 1200  # session A of KITTI 05 is frames 0 .. SPLIT-1, B the rest

@@ -13,23 +13,21 @@ profile's mean over the seeds is not within 30 % of the real front end.
 
 from __future__ import annotations
 
-import sys
 import tempfile
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from _street import DISTANCE_BANDS, band_counts, band_name, run_real_front_end  # noqa: E402
-from neoslam.config import NeoSLAMConfig  # noqa: E402
-from neoslam.datasets.simulated import read_dataset, write_dataset  # noqa: E402
-from neoslam.io.trajectory_files import read_trajectory  # noqa: E402
-from neoslam.jobs import simulation_config  # noqa: E402
-from neoslam.pipeline import run  # noqa: E402
-from neoslam.sim.simulator import simulate  # noqa: E402
-from neoslam.types import Frame, Trajectory  # noqa: E402
+from benchmarks._street import DISTANCE_BANDS, band_counts, band_name, run_real_front_end
+from benchmarks.harness import data_root, markdown_table
+from neoslam.config import NeoSLAMConfig
+from neoslam.datasets.simulated import read_dataset, write_dataset
+from neoslam.io.trajectory_files import read_trajectory
+from neoslam.jobs import simulation_config
+from neoslam.pipeline import run
+from neoslam.sim.simulator import simulate
+from neoslam.types import Frame, Trajectory
 
 SEEDS, QUICK_SEEDS = list(range(1, 11)), [1, 2]
 PROFILES = ("real", "ideal")

@@ -23,23 +23,20 @@ frames tells whether the class is right), and a recommended class list (classes 
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from _street import ASSOCIATION_RADIUS, SEQUENCE, Cluster, RealRun, along_and_lateral, cluster_observations  # noqa: E402
-from neoslam.config import NeoSLAMConfig  # noqa: E402
-from neoslam.datasets.kitti import KittiSequence, read_kitti_sequence  # noqa: E402
-from neoslam.perception.config import DetectorConfig  # noqa: E402
-from neoslam.perception.detection import Detection  # noqa: E402
-from neoslam.perception.detector import WindowedDetector, make_detector  # noqa: E402
-from neoslam.perception.stereo import ObjectTriangulator  # noqa: E402
-from neoslam.sim.profiles import DETECTION_PROFILES  # noqa: E402
-from neoslam.types import Frame  # noqa: E402
+from benchmarks._street import ASSOCIATION_RADIUS, SEQUENCE, Cluster, RealRun, along_and_lateral, cluster_observations
+from benchmarks.harness import data_root, markdown_table
+from neoslam.config import NeoSLAMConfig
+from neoslam.datasets.kitti import KittiSequence, read_kitti_sequence
+from neoslam.perception.config import DetectorConfig
+from neoslam.perception.detection import Detection
+from neoslam.perception.detector import WindowedDetector, make_detector
+from neoslam.perception.stereo import ObjectTriangulator
+from neoslam.sim.profiles import DETECTION_PROFILES
+from neoslam.types import Frame
 
 # COCO street classes and the spellings the models' names files use for them.
 STREET_CLASSES: dict[str, tuple[str, ...]] = {

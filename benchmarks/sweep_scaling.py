@@ -20,10 +20,9 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from _sweep import SPECS, with_changes  # noqa: E402
-from neoslam.sweep import LocalPool, RayCluster, expand, load_spec, parse_spec, run_sweep  # noqa: E402
+from benchmarks._sweep import SPECS, with_changes
+from benchmarks.harness import data_root, markdown_table
+from neoslam.sweep import LocalPool, RayCluster, expand, load_spec, parse_spec, run_sweep
 
 
 def _options(parser) -> None:
