@@ -194,6 +194,7 @@ class Run:
     started: dt.datetime = field(default_factory=lambda: dt.datetime.now(dt.UTC))
     load_start: list[float] | None = field(default_factory=load_average)
     clock: float = field(default_factory=time.perf_counter)
+    git: dict[str, Any] = field(default_factory=git_state)  # at the start: the code that ran
     tables: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     @property
@@ -220,7 +221,7 @@ class Run:
             "command": command_line(self.name, self.argv),
             "started": self.started.isoformat(timespec="seconds"),
             "wall_s": round(time.perf_counter() - self.clock, 1),
-            "git": git_state(),
+            "git": self.git,
             "machine": machine(),
             "load_average": {"start": self.load_start, "end": load_average()},
         }
