@@ -26,17 +26,19 @@ it placed at least twice: the two go together, so the simulated detections per f
 Prints a table of the measurements and the profile as a Python snippet for `neoslam.sim.profiles` (and as YAML for
 a `--config` file).
 
-    python benchmarks/calibrate_sim.py [--json FILE] [--labels FILE]
+    python -m benchmarks.calibrate_sim [--out FILE] [--labels FILE]
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from benchmarks import harness
 from benchmarks._street import (
     MIN_REPEATS,
     RealRun,
@@ -45,7 +47,7 @@ from benchmarks._street import (
     run_real_front_end,
     to_world,
 )
-from benchmarks.harness import REPO_ROOT, data_root, markdown_table
+from benchmarks.harness import REPO_ROOT, data_root
 from neoslam.config import DetectionNoiseConfig, NeoSLAMConfig, WorldConfig
 from neoslam.sim.detections import DetectionSimulator
 from neoslam.sim.visibility import column_offset
@@ -69,7 +71,10 @@ ROAD_CLEARANCE = 2.0  # m: a parked car's centre beside the driven car (two half
 DEFAULT_SPACING = WorldConfig().spacing
 
 
-def _arguments(parser) -> None:
+QUICK = "the whole fit (it has no smaller mode: 51 real frames, about a minute)"
+
+
+def arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--labels", type=Path, default=LABELS, help="hand labels of the vehicles (if present)")
 
 
@@ -400,8 +405,9 @@ def _yaml_snippet(profile: dict) -> str:
     return yaml.safe_dump(section, sort_keys=False, default_flow_style=None)
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], _arguments)
+def main(argv: list[str] | None = None) -> None:
+    bench = harness.start(__name__, __doc__, QUICK, arguments, argv, data=(("kitti_06_51",),))
+    args = bench.args
     config = NeoSLAMConfig()
     run = run_real_front_end(data_root() / "kitti_06_51", config)
     labels = _read_labels(args.labels)
@@ -425,20 +431,20 @@ def main() -> None:
             "disparity_samples",
         )
     ]
-    print(markdown_table(summary, ["measure", "value"]))
+    bench.table("summary", summary, ["measure", "value"])
     print()
-    print(markdown_table(result["tables"]["depth_bins"], ["bin", "object_frames", "placed"]))
+    bench.table("depth_bins", result["tables"]["depth_bins"], ["bin", "object_frames", "placed"])
     print()
-    print(markdown_table(result["tables"]["column_bins"], ["bin", "object_frames", "placed"]))
+    bench.table("column_bins", result["tables"]["column_bins"], ["bin", "object_frames", "placed"])
     print()
-    print(markdown_table(result["occlusion"], ["cover", "hidden_object_frames", "placed"]))
+    bench.table("occlusion", result["occlusion"], ["cover", "hidden_object_frames", "placed"])
     print()
-    print("# neoslam.sim.profiles, the `real` profile (python benchmarks/calibrate_sim.py):")
+    print("# neoslam.sim.profiles, the `real` profile (python -m benchmarks.calibrate_sim):")
     print(_python_snippet(result["profile"]))
     print()
     print("# or as a --config file:")
     print(_yaml_snippet(result["profile"]))
-    write_json(args.json, result)
+    bench.finish(result)
 
 
 if __name__ == "__main__":

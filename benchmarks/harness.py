@@ -171,10 +171,11 @@ def make_parser(description: str, quick: str, arguments: Arguments | None = None
     parser = argparse.ArgumentParser(
         description=description,
         epilog=f"--quick runs {quick}",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     parser.add_argument("--quick", action="store_true", help="a small run, for a smoke test")
-    parser.add_argument("--workers", type=int, default=default_workers(), help="worker processes, where it has any")
+    parser.add_argument(
+        "--workers", type=int, default=default_workers(), help="worker processes, where it has any (one per core)"
+    )
     parser.add_argument(
         "--out", type=Path, help="the JSON result (default: benchmarks/results/NAME.json, NAME.quick.json with --quick)"
     )
@@ -251,7 +252,8 @@ def start(
         module = spec.name if spec is not None else Path(sys.argv[0]).stem
     name = module.rsplit(".", 1)[-1]
     argv = list(sys.argv[1:] if argv is None else argv)
-    args = make_parser((doc or name).strip().splitlines()[0], quick, arguments).parse_args(argv)
+    description = " ".join((doc or name).strip().split("\n\n")[0].split())  # the docstring's first paragraph
+    args = make_parser(description, quick, arguments).parse_args(argv)
     for parts in data:
         require_data(*parts)
     return Run(name, args, argv)

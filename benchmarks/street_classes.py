@@ -18,17 +18,19 @@ than car, where they stand (along the driven path and to its side; the labels ar
 frames tells whether the class is right), and a recommended class list (classes with a stable object) and class mix
 (each class's share of the stable objects) for the simulator's WorldConfig.class_mix, beside the `real` profile's.
 
-    python benchmarks/street_classes.py [--quick] [--json FILE] [--yolo11] [--scores 0.45 0.3]
+    python -m benchmarks.street_classes [--quick] [--out FILE] [--yolo11] [--scores 0.45 0.3]
 """
 
 from __future__ import annotations
 
+import argparse
 from dataclasses import dataclass
 
 import numpy as np
 
+from benchmarks import harness
 from benchmarks._street import ASSOCIATION_RADIUS, SEQUENCE, Cluster, RealRun, along_and_lateral, cluster_observations
-from benchmarks.harness import data_root, markdown_table
+from benchmarks.harness import data_root
 from neoslam.config import NeoSLAMConfig
 from neoslam.datasets.kitti import KittiSequence, read_kitti_sequence
 from neoslam.perception.config import DetectorConfig
@@ -193,15 +195,19 @@ def class_mix(clusters: list[Cluster]) -> dict[str, float]:
     return {label: round(stable.count(label) / len(stable), 3) for label in STREET_CLASSES if label in stable}
 
 
-def _arguments(parser) -> None:
+QUICK = "the default score threshold only"
+
+
+def arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--yolo11", action="store_true", help="also YOLO11n (AGPL-3.0 weights from the shared data)")
     parser.add_argument(
         "--scores", nargs="+", type=float, default=None, help="placement score thresholds (default: 0.45 and 0.3)"
     )
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], _arguments)
+def main(argv: list[str] | None = None) -> None:
+    bench = harness.start(__name__, __doc__, QUICK, arguments, argv, data=(("kitti_06_51",),))
+    args = bench.args
     config = NeoSLAMConfig()
     default_score = config.perception.detector.score_threshold
     scores = args.scores or ([default_score] if args.quick else [default_score, 0.3])
@@ -218,7 +224,7 @@ def main() -> None:
         detections = detect_all(sequence, detector_config, name)
         scored = score_rows(detections, default_score)
         print(f"\n{name}, {len(sequence)} frames of kitti_06_51: boxes of every class down to score {LOW_SCORE:g}")
-        print(markdown_table(scored, list(scored[0])))
+        bench.table(f"scores {source}", scored, list(scored[0]))
         for score in scores:
             frames = place(sequence, detections, score, config)
             run = RealRun(frames, [], sequence.ground_truth, sequence.camera)
@@ -229,10 +235,10 @@ def main() -> None:
             print(
                 f"\n{name}: street-class boxes at score >= {score:g} through the ORB stereo step (classes with a box)"
             )
-            print(markdown_table(rows, list(rows[0])))
+            bench.table(f"classes {source} {score:g}", rows, list(rows[0]))
             if stable:
                 print(f"\nstable objects other than cars ({name}, score >= {score:g}):")
-                print(markdown_table(stable, list(stable[0])))
+                bench.table(f"stable {source} {score:g}", stable, list(stable[0]))
             stable_count = sum(is_stable(c) for c in clusters)
             bound = min(1.0, 3.0 / stable_count) if stable_count else 1.0
             print(
@@ -258,7 +264,7 @@ def main() -> None:
         f"WorldConfig.class_mix {chosen['mix']} (shares of the {chosen['stable_objects']} stable objects); "
         f"the `real` profile's class_mix (the street's hand-labelled objects): {shares}"
     )
-    write_json(args.json, {"frames": len(sequence), "low_score": LOW_SCORE, "results": results, "profile_mix": shares})
+    bench.finish({"frames": len(sequence), "low_score": LOW_SCORE, "results": results, "profile_mix": shares})
 
 
 if __name__ == "__main__":

@@ -1,5 +1,6 @@
-"""Which loop closures the experience map accepts: the paper's grid-cell check against the drift gate, which
-widens it with the metres travelled since the robot last knew where it was, and no gate at all.
+"""Part `gating` of the kitti_sim study: which loop closures the experience map accepts: the paper's grid-cell check
+against the drift gate, which widens it with the metres travelled since the robot last knew where it was, and no gate
+at all.
 
 For each KITTI sequence, odometry noise profile and seed: the real ground truth simulated once (`real` detection
 profile), then NeoSLAM run in-process with each gate (`experience_map.closure_gate`; `drift` at each rate of
@@ -15,20 +16,22 @@ gate: with `heavy` odometry no false closure on any KITTI drive, corrected ATE a
 05 and 06; with `vo` no drive worse than the paper's check with recall on detected; and the false closures of the
 trap. Ground truth is read for judging only.
 
-    python benchmarks/gating.py [--quick] [--json FILE] [--sequences 00 02 05 06 08] [--profiles vo heavy]
-                                [--seeds 1] [--gates grid-cells drift none] [--rates 2] [--recall-on detected accepted]
-                                [--no-trap]
+    python -m benchmarks.kitti_sim --parts gating [--sequences 00 02 05 06 08] [--profiles vo heavy] [--seeds 1]
+                                   [--gates grid-cells drift none] [--rates 2] [--recall-on detected accepted]
+                                   [--no-trap]
 
 `--quick`: KITTI 05 and the trap only.
 """
 
 from __future__ import annotations
 
+import argparse
 import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.harness import data_root, markdown_table
+from benchmarks import harness
+from benchmarks.harness import data_root
 from neoslam.config import NeoSLAMConfig, load_config
 from neoslam.datasets.simulated import read_dataset, write_dataset
 from neoslam.errors import InputError
@@ -47,16 +50,16 @@ TRAP_SEARCH_RADIUS_M = 1000.0  # matching.search_radius: the town's two look-ali
 PAPER_CHECK = "grid-cells"  # the paper's check, cells recalled on every detected closure: the reference for vo
 
 
-def _arguments(parser) -> None:
-    parser.add_argument("--sequences", nargs="+", default=SEQUENCES)
-    parser.add_argument("--profiles", nargs="+", default=PROFILES)
-    parser.add_argument("--seeds", nargs="+", type=int, default=[1])
-    parser.add_argument("--gates", nargs="+", default=GATES, choices=GATES)
-    parser.add_argument(
-        "--rates", nargs="+", type=float, default=[2.0], help="drift gate: cells per 100 m (default 2, the config's)"
+QUICK = "KITTI 05 and the trap only"
+
+
+def arguments(group: argparse._ArgumentGroup) -> None:
+    group.add_argument("--gates", nargs="+", default=GATES, choices=GATES, help="gating: the closure gates")
+    group.add_argument(
+        "--rates", nargs="+", type=float, default=[2.0], help="gating: drift gate cells per 100 m (the config's 2)"
     )
-    parser.add_argument("--recall-on", nargs="+", default=RECALLS, choices=RECALLS, help="hebbian.recall_on")
-    parser.add_argument("--no-trap", action="store_true", help="leave out the town trap")
+    group.add_argument("--recall-on", nargs="+", default=RECALLS, choices=RECALLS, help="gating: hebbian.recall_on")
+    group.add_argument("--no-trap", action="store_true", help="gating: leave out the town trap")
 
 
 def _variants(gates: list[str], rates: list[float], recalls: list[str]) -> list[tuple[str, dict]]:
@@ -162,14 +165,14 @@ def targets(rows: list[dict], gates: list[str]) -> list[dict]:
     return summary
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], _arguments)
-    sources = (["05"] if args.quick else args.sequences) + ([] if args.no_trap else [TRAP])
+def run_part(bench: harness.Run, args: argparse.Namespace) -> dict:
+    profiles, seeds = args.profiles or PROFILES, args.seeds or [1]
+    sources = (["05"] if args.quick else args.sequences or SEQUENCES) + ([] if args.no_trap else [TRAP])
     variants = _variants(args.gates, args.rates, args.recall_on)
     rows, errors = [], []
     for source in sources:
-        for profile in args.profiles:
-            for seed in args.seeds:
+        for profile in profiles:
+            for seed in seeds:
                 try:
                     rows += measure_drive(source, profile, seed, variants)
                 except InputError as error:  # a simulation that `neoslam run` would refuse: left out, named
@@ -177,16 +180,16 @@ def main() -> None:
     if errors:
         print("Failed drives (left out):\n\n" + "\n".join(f"- {e}" for e in errors) + "\n")
     names = [name for name, _ in variants]
-    rows.sort(key=lambda r: (args.profiles.index(r["profile"]), sources.index(r["sequence"]), r["seed"],
+    rows.sort(key=lambda r: (profiles.index(r["profile"]), sources.index(r["sequence"]), r["seed"],
                              names.index(r["gate"])))  # fmt: skip
     columns = ["sequence", "profile", "seed", "gate", "ate_odometry_m", "ate_corrected_m", "corrected_share",
                "closures_accepted", "closures_false", "closures_rejected", "loop_recall", "run_s"]  # fmt: skip
-    print(markdown_table(rows, columns))
+    bench.table("gating", rows, columns)
     summary = targets(rows, names)
-    print("\nTargets of the closure gate (KITTI drives, and the town trap apart):\n")
-    print(markdown_table(summary, list(summary[0])))
-    write_json(args.json, {"rows": rows, "targets": summary, "failed": errors})
-
-
-if __name__ == "__main__":
-    main()
+    bench.table(
+        "gating_targets",
+        summary,
+        list(summary[0]),
+        title="Targets of the closure gate (KITTI drives, and the town trap apart):",
+    )
+    return {"rows": rows, "targets": summary, "failed": errors}

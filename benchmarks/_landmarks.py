@@ -1,4 +1,5 @@
-"""Objects as landmarks in the pose graph (iSAM2) against the pose graph without them, on simulated KITTI drives.
+"""Part `landmarks` of the kitti_sim study: objects as landmarks in the pose graph (iSAM2) against the pose graph
+without them, on simulated KITTI drives.
 
 Per sequence and detection profile (`vo` odometry, one seed): the drive is simulated once, then NeoSLAM runs it
 with `experience_map.object_landmarks` off and on (pose-graph back end). Per run: ATE (SE(3)-aligned) of the
@@ -6,14 +7,15 @@ odometry and of the corrected trajectory, loop closures accepted (true, false: w
 apart), the objects and landmarks of the map, and the wall time in the back end's solver calls (the batch pose graph
 at loops, or every iSAM2 update) over the whole run.
 
-    python benchmarks/landmarks.py [--quick] [--json FILE] [--sequences 05 08 00 06] [--detectors real ideal]
-                                   [--profile vo] [--seed 1] [--cache DIR]
+    python -m benchmarks.kitti_sim --parts landmarks [--sequences 05 08 00 06] [--detectors real ideal]
+                                   [--profiles vo] [--seeds 1] [--cache DIR]
 
 `--quick`: KITTI 06 with the real profile only. `--cache DIR` keeps the simulated drives there and reuses them.
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 import tempfile
 import time
@@ -21,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import harness
 from benchmarks.harness import data_root, markdown_table
 from neoslam.config import NeoSLAMConfig, load_config
 from neoslam.datasets.simulated import read_dataset, write_dataset
@@ -48,12 +51,11 @@ COLUMNS = [
 ]
 
 
-def _arguments(parser) -> None:
-    parser.add_argument("--sequences", nargs="+", default=SEQUENCES)
-    parser.add_argument("--detectors", nargs="+", default=DETECTORS)
-    parser.add_argument("--profile", default="vo", help="odometry noise profile (default vo)")
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--cache", type=Path, help="keep the simulated drives in this folder and reuse them")
+QUICK = "KITTI 06 with the real profile only"
+
+
+def arguments(group: argparse._ArgumentGroup) -> None:
+    group.add_argument("--cache", type=Path, help="landmarks: keep the simulated drives in this folder and reuse them")
 
 
 def _config(profile: str, seed: int, detector: str, landmarks: bool) -> NeoSLAMConfig:
@@ -97,23 +99,21 @@ def run_drive(path: Path, config: NeoSLAMConfig) -> dict:
     }
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], _arguments)
-    sequences, detectors = (["06"], ["real"]) if args.quick else (args.sequences, args.detectors)
+def run_part(bench: harness.Run, args: argparse.Namespace) -> dict:
+    profile = args.profiles[0] if args.profiles else "vo"
+    seed = args.seeds[0] if args.seeds else 1
+    sequences = ["06"] if args.quick else args.sequences or SEQUENCES
+    detectors = ["real"] if args.quick else args.detectors or DETECTORS
     rows = []
     with tempfile.TemporaryDirectory(prefix="landmarks-") as temporary:
         folder = args.cache if args.cache is not None else Path(temporary)
         for sequence in sequences:
             for detector in detectors:
-                path = _drive(folder, sequence, args.profile, args.seed, detector)
+                path = _drive(folder, sequence, profile, seed, detector)
                 for landmarks in (False, True):
-                    figures = run_drive(path, _config(args.profile, args.seed, detector, landmarks))
+                    figures = run_drive(path, _config(profile, seed, detector, landmarks))
                     rows.append({"sequence": sequence, "detector": detector, "landmarks": landmarks} | figures)
                     print(markdown_table(rows[-1:], COLUMNS).splitlines()[-1], file=sys.stderr, flush=True)
-    print(f"{args.profile} odometry, seed {args.seed}; ATE RMSE (m) after SE(3) alignment; back end: solver seconds")
-    print(markdown_table(rows, COLUMNS))
-    write_json(args.json, {"profile": args.profile, "seed": args.seed, "rows": rows})
-
-
-if __name__ == "__main__":
-    main()
+    title = f"{profile} odometry, seed {seed}; ATE RMSE (m) after SE(3) alignment; back end: solver seconds"
+    bench.table("landmarks", rows, COLUMNS, title=title)
+    return {"profile": profile, "seed": seed, "rows": rows}

@@ -1,5 +1,5 @@
-"""Moving objects kept out of keyframes and the map: simulated KITTI drives with a share of moving objects, NeoSLAM
-with the motion detector off and on.
+"""Part `moving` of the kitti_sim study: moving objects kept out of keyframes and the map; simulated KITTI drives
+with a share of moving objects, NeoSLAM with the motion detector off and on.
 
 Each drive (KITTI ground truth, `vo` odometry, the `real` detection profile, one seed) is simulated with
 `world.moving_fraction` 0, 0.2 and 0.4 (the simulator's own traffic model), then run with `moving_objects.enabled`
@@ -20,22 +20,23 @@ The `oracle` rows are the reference a detector aims at: the same drive with the 
 by the simulator's truth before NeoSLAM sees them (the detector off), i.e. the street's parked objects only (a
 drive with moving_fraction 0.2 has a fifth fewer parked objects than the static street).
 
-    python benchmarks/moving.py [--quick] [--json FILE] [--sequences 05 00] [--fractions 0 0.2 0.4] [--seeds 1]
-                                [--config FILE.yaml] [--modes off on oracle]
+    python -m benchmarks.kitti_sim --parts moving [--sequences 05 00] [--fractions 0 0.2 0.4] [--seeds 1]
+                                   [--profiles vo] [--detectors real] [--config FILE.yaml] [--modes off on oracle]
 
 `--quick`: KITTI 05's first 1200 frames, fractions 0 and 0.2.
 """
 
 from __future__ import annotations
 
+import argparse
 import tempfile
 from dataclasses import replace
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
 
-from benchmarks.harness import data_root, markdown_table
+from benchmarks import harness
+from benchmarks.harness import data_root
 from neoslam.config import NeoSLAMConfig, load_config
 from neoslam.datasets.simulated import SimulatedDataset, read_dataset, write_dataset
 from neoslam.evaluation.report import loop_metrics
@@ -43,6 +44,7 @@ from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
 from neoslam.io.tables import numeric_column, read_table
 from neoslam.io.trajectory_files import read_trajectory
 from neoslam.jobs import simulation_config
+from neoslam.loop.keyframes import KeyframeStep
 from neoslam.pipeline import NeoSLAM
 from neoslam.sim.simulator import simulate
 
@@ -53,15 +55,13 @@ MODES = ("off", "on", "oracle")
 OBJECT_COLUMNS = ("id", "label", "x", "y", "z", "length", "width", "height", "yaw", "vx", "vy", "vz")
 
 
-def _arguments(parser) -> None:
-    parser.add_argument("--sequences", nargs="+", default=None, help="KITTI sequences (default 05 00)")
-    parser.add_argument("--fractions", nargs="+", type=float, default=None, help="moving fractions (0 0.2 0.4)")
-    parser.add_argument("--seeds", nargs="+", type=int, default=[1])
-    parser.add_argument("--profile", default="vo", help="odometry noise profile (default vo)")
-    parser.add_argument("--detector", default="real", help="detection profile (default real)")
-    parser.add_argument("--config", type=Path, help="a config file under both runs (the detector's settings)")
-    parser.add_argument(
-        "--modes", nargs="+", choices=MODES, default=list(MODES), help="detector off, on, and the oracle (see above)"
+QUICK = f"KITTI 05's first {QUICK_FRAMES} frames, fractions 0 and 0.2"
+
+
+def arguments(group: argparse._ArgumentGroup) -> None:
+    group.add_argument("--fractions", nargs="+", type=float, default=None, help="moving: moving fractions (0 0.2 0.4)")
+    group.add_argument(
+        "--modes", nargs="+", choices=MODES, default=list(MODES), help="moving: detector off, on, and the oracle"
     )
 
 
@@ -112,21 +112,8 @@ def run_drive(job: dict) -> dict:
     config = config.model_copy(update={"moving_objects": moving_objects})
     moving, real = _moving_rows(dataset)
     slam = NeoSLAM(config)
-    joined: dict[int, object] = {}  # id(observation) -> window object, this frame
-    made: list = []
-    window_add, keyframes_add = slam.keyframes.window.add, slam.keyframes.add
-
-    def record_window(pose, observations, odometer_m):
-        objects = window_add(pose, observations, odometer_m)
-        joined.update({id(o): w for o, w in zip(observations, objects, strict=True)})
-        return objects
-
-    def record_keyframe(*args, **kwargs):
-        keyframe = keyframes_add(*args, **kwargs)
-        made.append(keyframe)
-        return keyframe
-
-    slam.keyframes.window.add, slam.keyframes.add = record_window, record_keyframe
+    steps: list[KeyframeStep] = []  # what the keyframe builder did with this frame
+    slam.keyframes.observers.append(steps.append)
     passed = np.zeros(len(moving), dtype=bool)
     moving_at_keyframes = kept_out = kept_provisional = 0
     for frame, rows in zip(dataset.frames(), dataset.detection_rows(), strict=True):
@@ -134,11 +121,11 @@ def run_drive(job: dict) -> dict:
             frame = replace(frame, observations=tuple(o for o, r in zip(frame.observations, rows, strict=True)
                                                       if not moving[r]))  # fmt: skip
             rows = rows[~moving[rows]]
-        joined.clear()
-        made.clear()
+        steps.clear()
         slam.step(frame)
+        joined = {id(o): w for step in steps for o, w in zip(step.observations, step.joined, strict=True)}
         passed[rows] = [id(o) in joined for o in frame.observations]
-        keyframe = made[-1] if made else None
+        keyframe = steps[-1].keyframe if steps else None
         if keyframe is None:
             continue
         for observation, row in zip(frame.observations, rows, strict=True):
@@ -177,35 +164,32 @@ def run_drive(job: dict) -> dict:
     }
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], _arguments)
+def run_part(bench: harness.Run, args: argparse.Namespace) -> dict:
     sequences = args.sequences or (["05"] if args.quick else SEQUENCES)
     fractions = args.fractions or ([0.0, 0.2] if args.quick else FRACTIONS)
+    seeds = args.seeds or [1]
+    profile = args.profiles[0] if args.profiles else "vo"
+    detector = args.detectors[0] if args.detectors else "real"
     frames = QUICK_FRAMES if args.quick else None
-    context = get_context("spawn")
     with tempfile.TemporaryDirectory() as tmp:
         drives = [
-            {"sequence": s, "seed": seed, "fraction": f, "profile": args.profile, "detector": args.detector,
+            {"sequence": s, "seed": seed, "fraction": f, "profile": profile, "detector": detector,
              "config": str(args.config) if args.config else None, "frames": frames,
              "folder": str(Path(tmp) / f"{s}_{seed}_{f}")}
-            for s in sequences for seed in args.seeds for f in fractions
+            for s in sequences for seed in seeds for f in fractions
         ]  # fmt: skip
-        with context.Pool(2, maxtasksperchild=1) as pool:
+        with harness.pool(args.workers) as pool:
             drives = pool.map(simulate_drive, drives, chunksize=1)
         runs = [d | {"mode": mode} for d in drives for mode in args.modes]
-        with context.Pool(2, maxtasksperchild=1) as pool:
+        with harness.pool(args.workers) as pool:
             rows = pool.map(run_drive, runs, chunksize=1)
     cut = f", first {frames} frames" if frames else ""
     print(
-        f"## Moving objects: simulated KITTI {', '.join(sequences)} ({args.profile} odometry, {args.detector} "
-        f"detection profile, seeds {', '.join(map(str, args.seeds))}{cut})\n"
+        f"## Moving objects: simulated KITTI {', '.join(sequences)} ({profile} odometry, {detector} "
+        f"detection profile, seeds {', '.join(map(str, seeds))}{cut})\n"
     )
     columns = ["sequence", "seed", "moving_fraction", "detector", "loop_precision", "loop_recall", "closures",
                "ate_corrected_m", "objects", "moving_reported", "moving_at_keyframes", "moving_kept_out",
                "moving_not_known", "static_flagged", "heading_noise", "distance_noise"]  # fmt: skip
-    print(markdown_table(rows, columns))
-    write_json(args.json, {"profile": args.profile, "detector": args.detector, "frames": frames, "rows": rows})
-
-
-if __name__ == "__main__":
-    main()
+    bench.table("moving", rows, columns)
+    return {"profile": profile, "detector": detector, "frames": frames, "rows": rows}
