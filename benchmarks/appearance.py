@@ -71,6 +71,7 @@ from benchmarks._street import (
 )
 from benchmarks.harness import data_root
 from benchmarks.real_streets import THIRD_PASS
+from benchmarks.sim2real import ODOMETRY, _street_poses
 from neoslam.config import NeoSLAMConfig, SimulatorConfig
 from neoslam.datasets.kitti import KittiSequence, read_kitti_sequence
 from neoslam.datasets.replay import ReplayedSequence, forward_back_forward
@@ -78,7 +79,6 @@ from neoslam.jobs import simulation_config
 from neoslam.perception.frontend import open_front_end
 from neoslam.sim.simulator import simulate
 from neoslam.types import Frame, Trajectory
-from sim2real import ODOMETRY, _street_poses
 
 LABEL = "car"  # the matcher compares patches within a label; the street's objects are almost all cars
 SEEDS, QUICK_SEEDS = [1, 2, 3, 4, 5], [1, 2]
