@@ -1,39 +1,38 @@
 """Part `landmarks` of the kitti_sim study: objects as landmarks in the pose graph (iSAM2) against the pose graph
 without them, on simulated KITTI drives.
 
-Per sequence and detection profile (`vo` odometry, one seed): the drive is simulated once, then NeoSLAM runs it
-with `experience_map.object_landmarks` off and on (pose-graph back end). Per run: ATE (SE(3)-aligned) of the
-odometry and of the corrected trajectory, loop closures accepted (true, false: within 5 m horizontally, 100 frames
-apart), the objects and landmarks of the map, and the wall time in the back end's solver calls (the batch pose graph
-at loops, or every iSAM2 update) over the whole run.
+Per sequence and detection profile (`vo` odometry, one seed): the drive is simulated once, then NeoSLAM runs it with
+`experience_map.object_landmarks` off and on (pose-graph back end): the sweep `benchmarks/specs/landmarks.yaml` with
+`measure` below as each cell's measurement (--workers, --ray and --sweep-dir as for the part `steps`). Per run: ATE
+(SE(3)-aligned) of the odometry and of the corrected trajectory, loop closures accepted (true, false: within 5 m
+horizontally, 100 frames apart), the objects and landmarks of the map, and the wall time in the back end's solver
+calls (the batch pose graph at loops, or every iSAM2 update) over the whole run.
 
     python -m benchmarks.kitti_sim --parts landmarks [--sequences 05 08 00 06] [--detectors real ideal]
-                                   [--profiles vo] [--seeds 1] [--cache DIR]
+                                   [--profiles vo] [--seeds 1]
 
-`--quick`: KITTI 06 with the real profile only. `--cache DIR` keeps the simulated drives there and reuses them.
+`--quick`: KITTI 06 with the real profile only.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
 from benchmarks import harness
-from benchmarks.harness import data_root, markdown_table
-from neoslam.config import NeoSLAMConfig, load_config
-from neoslam.datasets.simulated import read_dataset, write_dataset
+from benchmarks._sweep import SPECS, run_spec, with_changes
+from benchmarks.harness import data_root
+from neoslam.config import NeoSLAMConfig
+from neoslam.datasets.simulated import read_dataset
 from neoslam.evaluation.loops import LoopCriteria, judge_closures
 from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
-from neoslam.io.trajectory_files import read_trajectory
-from neoslam.jobs import simulation_config
 from neoslam.pipeline import NeoSLAM
-from neoslam.sim.simulator import simulate
+from neoslam.sweep import load_spec
 
+SPEC = SPECS / "landmarks.yaml"
 SEQUENCES = ["05", "08", "00", "06"]
 DETECTORS = ["real", "ideal"]
 COLUMNS = [
@@ -55,29 +54,12 @@ QUICK = "KITTI 06 with the real profile only"
 
 
 def arguments(group: argparse._ArgumentGroup) -> None:
-    group.add_argument("--cache", type=Path, help="landmarks: keep the simulated drives in this folder and reuse them")
+    """No options of its own: the study's --sequences, --profiles, --seeds, --detectors and the sweep's."""
 
 
-def _config(profile: str, seed: int, detector: str, landmarks: bool) -> NeoSLAMConfig:
-    config = simulation_config(load_config(environ={}), profile, seed, detector)
-    experience_map = config.experience_map.model_copy(update={"backend": "pose-graph", "object_landmarks": landmarks})
-    return config.model_copy(update={"experience_map": experience_map})
-
-
-def _drive(folder: Path, sequence: str, profile: str, seed: int, detector: str) -> Path:
-    """The simulated drive's folder, simulated unless it is there already."""
-    path = folder / f"{sequence}_{detector}_{profile}_{seed}"
-    if not (path / "dataset.yaml").exists():
-        simulator = _config(profile, seed, detector, False).simulator
-        poses = data_root() / "kitti" / "poses" / f"{sequence}.txt"
-        truth = read_trajectory(poses, "kitti", None, frame_period=simulator.frame_period)
-        write_dataset(path, simulate(truth, simulator, name=sequence, source=str(poses)))
-    return path
-
-
-def run_drive(path: Path, config: NeoSLAMConfig) -> dict:
-    """NeoSLAM over one simulated drive; the figures of one row."""
-    dataset = read_dataset(path)
+def measure(data: Path, config: NeoSLAMConfig, out: Path, inputs=None) -> dict:
+    """A sweep cell: NeoSLAM over one simulated drive, in this process; the figures of one row."""
+    dataset = read_dataset(data)
     slam = NeoSLAM(config)
     start = time.perf_counter()
     for frame in dataset.frames():
@@ -104,16 +86,29 @@ def run_part(bench: harness.Run, args: argparse.Namespace) -> dict:
     seed = args.seeds[0] if args.seeds else 1
     sequences = ["06"] if args.quick else args.sequences or SEQUENCES
     detectors = ["real"] if args.quick else args.detectors or DETECTORS
-    rows = []
-    with tempfile.TemporaryDirectory(prefix="landmarks-") as temporary:
-        folder = args.cache if args.cache is not None else Path(temporary)
-        for sequence in sequences:
-            for detector in detectors:
-                path = _drive(folder, sequence, profile, seed, detector)
-                for landmarks in (False, True):
-                    figures = run_drive(path, _config(profile, seed, detector, landmarks))
-                    rows.append({"sequence": sequence, "detector": detector, "landmarks": landmarks} | figures)
-                    print(markdown_table(rows[-1:], COLUMNS).splitlines()[-1], file=sys.stderr, flush=True)
+    spec = with_changes(
+        load_spec(SPEC),
+        sources=[{"kitti": sequences}],
+        noise=[profile],
+        detectors=detectors,
+        seeds=[seed],
+        metrics=COLUMNS[3:],
+        data_root=data_root(),
+    )
+    figures: dict[tuple, dict] = {}
+    with run_spec(spec, args, measure=measure) as sweep:
+        for record in sweep.failed:
+            print(f"- failed: {record.cell.source} {record.cell.detector} {record.cell.override}: {record.error}")
+        for record in sweep.records:
+            if record.status == "ok":
+                figures[(record.cell.source, record.cell.detector, record.cell.override == "with")] = record.metrics
+    rows = [
+        {"sequence": sequence, "detector": detector, "landmarks": landmarks} | figures[(sequence, detector, landmarks)]
+        for sequence in sequences
+        for detector in detectors
+        for landmarks in (False, True)
+        if (sequence, detector, landmarks) in figures
+    ]
     title = f"{profile} odometry, seed {seed}; ATE RMSE (m) after SE(3) alignment; back end: solver seconds"
     bench.table("landmarks", rows, COLUMNS, title=title)
     return {"profile": profile, "seed": seed, "rows": rows}
