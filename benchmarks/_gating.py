@@ -3,7 +3,8 @@ against the drift gate, which widens it with the metres travelled since the robo
 at all.
 
 For each KITTI sequence, odometry noise profile and seed: the real ground truth simulated once (`real` detection
-profile), then NeoSLAM run in-process with each gate (`experience_map.closure_gate`; `drift` at each rate of
+profile), then NeoSLAM run with each gate (a sweep, `benchmarks/specs/gating.yaml`, with `measure` below as each
+cell's measurement) (`experience_map.closure_gate`; `drift` at each rate of
 --rates, cells per 100 m), each with the cells recalled on every closure the detector accepts (`hebbian.recall_on:
 detected`, NeuroSLAM's local-view calibration) and only on those the gate accepted (`accepted`, the paper's order
 and the default; "+ paper recall").
@@ -26,25 +27,25 @@ trap. Ground truth is read for judging only.
 from __future__ import annotations
 
 import argparse
-import tempfile
 import time
 from pathlib import Path
 
 from benchmarks import harness
+from benchmarks._sweep import SPECS, run_spec, with_changes
 from benchmarks.harness import data_root
-from neoslam.config import NeoSLAMConfig, load_config
-from neoslam.datasets.simulated import read_dataset, write_dataset
-from neoslam.errors import InputError
+from neoslam.config import NeoSLAMConfig
+from neoslam.datasets.simulated import read_dataset
 from neoslam.evaluation.report import loop_metrics
 from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
-from neoslam.jobs import record, simulation_config
 from neoslam.pipeline import run
+from neoslam.sweep import load_spec
 
 SEQUENCES = ["00", "02", "05", "06", "08"]
 PROFILES = ["vo", "heavy"]
 GATES = ["grid-cells", "drift", "none"]
 RECALLS = ["detected", "accepted"]
 QUARTER_ON = ("05", "06")  # the ATE target: corrected at most a quarter of the odometry's here
+SPEC = SPECS / "gating.yaml"  # the default variants; the options below replace them
 TRAP = "town-trap"
 TRAP_SEARCH_RADIUS_M = 1000.0  # matching.search_radius: the town's two look-alike streets are 370 m apart
 PAPER_CHECK = "grid-cells"  # the paper's check, cells recalled on every detected closure: the reference for vo
@@ -82,54 +83,52 @@ def _variants(gates: list[str], rates: list[float], recalls: list[str]) -> list[
     return variants
 
 
-def _changed(config: NeoSLAMConfig, sections: dict[str, dict]) -> NeoSLAMConfig:
-    update = {name: getattr(config, name).model_copy(update=values) for name, values in sections.items()}
-    return config.model_copy(update=update)
-
-
-def measure_drive(source: str, profile: str, seed: int, variants: list[tuple[str, dict]]) -> list[dict]:
-    """One simulated drive (a KITTI sequence, or the town trap), run once per variant: a row each."""
-    config = simulation_config(load_config(environ={}), profile, seed, "real")
-    start = time.perf_counter()
-    if source == TRAP:
-        config = _changed(config, {"matching": {"search_radius": TRAP_SEARCH_RADIUS_M}})
-        recording = record(config, route="town")
-    else:
-        recording = record(config, trajectory=data_root() / "kitti" / "poses" / f"{source}.txt", fmt="kitti")
-    with tempfile.TemporaryDirectory(prefix="gating-") as folder:
-        write_dataset(Path(folder), recording)
-        dataset = read_dataset(Path(folder))  # checked as `neoslam run` reads it
-        frames = list(dataset.frames())
-    simulate_s = time.perf_counter() - start
+def measure(data: Path, config: NeoSLAMConfig, out: Path, inputs=None) -> dict:
+    """A sweep cell: NeoSLAM over one simulated drive with one gate, in this process; the figures of one row."""
+    dataset = read_dataset(data)
+    frames = list(dataset.frames())
     truth = dataset.ground_truth
     assert truth is not None
-    rows = []
-    for name, sections in variants:
-        gated = _changed(config, sections)
-        start = time.perf_counter()
-        result = run(iter(frames), gated, total=len(frames), progress=False)
-        run_s = time.perf_counter() - start
-        loops = loop_metrics(result.session_closures(), truth, gated.evaluation, result.keyframe_frames)
-        odometry = absolute_trajectory_error(result.odometry, truth, "se3").rmse
-        corrected = absolute_trajectory_error(result.estimate, truth, "se3").rmse
-        rows.append(
-            {
-                "sequence": source,
-                "profile": profile,
-                "seed": seed,
-                "gate": name,
-                "ate_odometry_m": odometry,
-                "ate_corrected_m": corrected,
-                "corrected_share": corrected / odometry,
-                "closures_accepted": loops["accepted"],
-                "closures_false": loops["false_positive"],
-                "closures_rejected": len(result.experience_map.rejected_closures),
-                "loop_recall": loops["recall"],
-                "simulate_s": simulate_s,
-                "run_s": run_s,
-            }
-        )
-    return rows
+    start = time.perf_counter()
+    result = run(iter(frames), config, total=len(frames), progress=False)
+    run_s = time.perf_counter() - start
+    loops = loop_metrics(result.session_closures(), truth, config.evaluation, result.keyframe_frames)
+    odometry = absolute_trajectory_error(result.odometry, truth, "se3").rmse
+    corrected = absolute_trajectory_error(result.estimate, truth, "se3").rmse
+    return {
+        "ate_odometry_m": odometry,
+        "ate_corrected_m": corrected,
+        "corrected_share": corrected / odometry,
+        "closures_accepted": loops["accepted"],
+        "closures_false": loops["false_positive"],
+        "closures_rejected": len(result.experience_map.rejected_closures),
+        "loop_recall": loops["recall"],
+        "run_s": run_s,
+    }
+
+
+def _sweep(bench_args: argparse.Namespace, spec, sources: list[dict], variants, profiles, seeds, label=None):
+    """The rows of the spec's cells on these sources and variants (a failed cell left out, its error returned)."""
+    spec = with_changes(
+        spec,
+        sources=sources,
+        noise=profiles,
+        seeds=seeds,
+        overrides=dict(variants),
+        metrics=["ate_corrected_m", "closures_false", "loop_recall"],
+        data_root=data_root(),
+    )
+    rows, errors = [], []
+    with run_spec(spec, bench_args, measure=measure) as sweep:
+        for record in sweep.records:
+            cell = record.cell
+            source = label or cell.source
+            if record.status != "ok":
+                errors.append(f"{source} {cell.noise} seed {cell.seed} {cell.override}: {record.error}")
+                continue
+            rows.append({"sequence": source, "profile": cell.noise, "seed": cell.seed, "gate": cell.override}
+                        | record.metrics)  # fmt: skip
+    return rows, errors
 
 
 def _drive(row: dict) -> tuple[str, str, int]:
@@ -169,16 +168,17 @@ def run_part(bench: harness.Run, args: argparse.Namespace) -> dict:
     profiles, seeds = args.profiles or PROFILES, args.seeds or [1]
     sources = (["05"] if args.quick else args.sequences or SEQUENCES) + ([] if args.no_trap else [TRAP])
     variants = _variants(args.gates, args.rates, args.recall_on)
-    rows, errors = [], []
-    for source in sources:
-        for profile in profiles:
-            for seed in seeds:
-                try:
-                    rows += measure_drive(source, profile, seed, variants)
-                except InputError as error:  # a simulation that `neoslam run` would refuse: left out, named
-                    errors.append(f"{source} {profile} seed {seed}: {error}")
+    spec = load_spec(SPEC)
+    kitti = [s for s in sources if s != TRAP]
+    rows, errors = _sweep(args, spec, [{"kitti": kitti}], variants, profiles, seeds) if kitti else ([], [])
+    if TRAP in sources:  # the trap: the town route with the search radius opened, under every variant
+        opened = [
+            (name, sections | {"matching": {"search_radius": TRAP_SEARCH_RADIUS_M}}) for name, sections in variants
+        ]
+        trap_rows, trap_errors = _sweep(args, spec, [{"route": "town"}], opened, profiles, seeds, label=TRAP)
+        rows, errors = rows + trap_rows, errors + trap_errors
     if errors:
-        print("Failed drives (left out):\n\n" + "\n".join(f"- {e}" for e in errors) + "\n")
+        print("Failed runs (left out):\n\n" + "\n".join(f"- {e}" for e in errors) + "\n")
     names = [name for name, _ in variants]
     rows.sort(key=lambda r: (profiles.index(r["profile"]), sources.index(r["sequence"]), r["seed"],
                              names.index(r["gate"])))  # fmt: skip
