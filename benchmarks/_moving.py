@@ -3,10 +3,10 @@ with a share of moving objects, NeoSLAM with the motion detector off and on.
 
 Each drive (KITTI ground truth, `vo` odometry, the `real` detection profile, one seed) is simulated with
 `world.moving_fraction` 0, 0.2 and 0.4 (the simulator's own traffic model), then run with `moving_objects.enabled`
-false and true. Per run: loop precision and recall (true within 5 m horizontally and 100 frames apart, recall over
-the keyframes' frames), ATE of the corrected trajectory (SE(3)-aligned), objects in the map and moving objects
-reported, and from the simulator's truth (truth/detections.csv: row -> object; truth/objects.csv: its velocity,
-moving when its speed is > 0):
+false and true: a sweep, `benchmarks/specs/moving.yaml`, with `measure` below as each cell's measurement. Per run:
+loop precision and recall (true within 5 m horizontally and 100 frames apart, recall over the keyframes' frames), ATE
+of the corrected trajectory (SE(3)-aligned), objects in the map and moving objects reported, and from the simulator's
+truth (truth/detections.csv: row -> object; truth/objects.csv: its velocity, moving when its speed is > 0):
 - `moving_kept_out`: among the detections of moving objects in frames that made a keyframe, the share not in that
   keyframe (flagged moving, or fused into a window object the keyframe does not hold);
 - `moving_not_known`: the share not in that keyframe as an object known to be static (out of it, or in it as a
@@ -29,25 +29,24 @@ drive with moving_fraction 0.2 has a fifth fewer parked objects than the static 
 from __future__ import annotations
 
 import argparse
-import tempfile
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from benchmarks import harness
+from benchmarks._sweep import SPECS, run_spec, with_changes
 from benchmarks.harness import data_root
-from neoslam.config import NeoSLAMConfig, load_config
-from neoslam.datasets.simulated import SimulatedDataset, read_dataset, write_dataset
+from neoslam.config import NeoSLAMConfig
+from neoslam.datasets.simulated import SimulatedDataset, read_dataset
 from neoslam.evaluation.report import loop_metrics
 from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
 from neoslam.io.tables import numeric_column, read_table
-from neoslam.io.trajectory_files import read_trajectory
-from neoslam.jobs import simulation_config
 from neoslam.loop.keyframes import KeyframeStep
 from neoslam.pipeline import NeoSLAM
-from neoslam.sim.simulator import simulate
+from neoslam.sweep import load_spec
 
+SPEC = SPECS / "moving.yaml"  # its overrides are replaced by the options' fractions and modes
 SEQUENCES = ["05", "00"]
 FRACTIONS = [0.0, 0.2, 0.4]
 QUICK_FRAMES = 1200
@@ -63,25 +62,6 @@ def arguments(group: argparse._ArgumentGroup) -> None:
     group.add_argument(
         "--modes", nargs="+", choices=MODES, default=list(MODES), help="moving: detector off, on, and the oracle"
     )
-
-
-def _config(job: dict) -> NeoSLAMConfig:
-    base = load_config(Path(job["config"]) if job["config"] else None, environ={})
-    config = simulation_config(base, job["profile"], job["seed"], job["detector"])
-    world = config.simulator.world.model_copy(update={"moving_fraction": job["fraction"]})
-    return config.model_copy(update={"simulator": config.simulator.model_copy(update={"world": world})})
-
-
-def simulate_drive(job: dict) -> dict:
-    """Simulate the drive into job["folder"]."""
-    config = _config(job)
-    poses = data_root() / "kitti" / "poses" / f"{job['sequence']}.txt"
-    truth = read_trajectory(poses, "kitti", None, frame_period=config.simulator.frame_period)
-    if job["frames"]:
-        truth = truth.subset(np.arange(min(job["frames"], len(truth))))
-    recording = simulate(truth, config.simulator, job["sequence"], job["sequence"])
-    write_dataset(Path(job["folder"]), recording)
-    return job
 
 
 def _moving_rows(dataset: SimulatedDataset) -> np.ndarray:
@@ -103,13 +83,20 @@ def _share(part: int, whole: int) -> float:
     return part / whole if whole else float("nan")
 
 
-def run_drive(job: dict) -> dict:
-    """NeoSLAM over the drive with the detector on or off; each observation followed to the keyframe window
-    object it joined (if any), and each keyframe checked for the moving objects' detections of its frame."""
-    dataset = read_dataset(Path(job["folder"]))
-    config = _config(job)
-    moving_objects = config.moving_objects.model_copy(update={"enabled": job["mode"] == "on"})
-    config = config.model_copy(update={"moving_objects": moving_objects})
+def measure(data: Path, config: NeoSLAMConfig, out: Path, inputs=None) -> dict:
+    """A sweep cell: the drive with the motion detector as the config has it (`moving_objects.enabled`)."""
+    return _measure(data, config, oracle=False)
+
+
+def measure_oracle(data: Path, config: NeoSLAMConfig, out: Path, inputs=None) -> dict:
+    """A sweep cell: the drive without the moving objects' detections (the detector off)."""
+    return _measure(data, config, oracle=True)
+
+
+def _measure(data: Path, config: NeoSLAMConfig, oracle: bool) -> dict:
+    """NeoSLAM over the drive; each observation followed to the keyframe window object it joined (if any), and
+    each keyframe checked for the moving objects' detections of its frame."""
+    dataset = read_dataset(data)
     moving, real = _moving_rows(dataset)
     slam = NeoSLAM(config)
     steps: list[KeyframeStep] = []  # what the keyframe builder did with this frame
@@ -117,7 +104,7 @@ def run_drive(job: dict) -> dict:
     passed = np.zeros(len(moving), dtype=bool)
     moving_at_keyframes = kept_out = kept_provisional = 0
     for frame, rows in zip(dataset.frames(), dataset.detection_rows(), strict=True):
-        if job["mode"] == "oracle":  # truth removes the moving objects' detections: the same street, parked only
+        if oracle:  # truth removes the moving objects' detections: the same street, parked only
             frame = replace(frame, observations=tuple(o for o, r in zip(frame.observations, rows, strict=True)
                                                       if not moving[r]))  # fmt: skip
             rows = rows[~moving[rows]]
@@ -143,10 +130,6 @@ def run_drive(job: dict) -> dict:
     loops = loop_metrics(result.session_closures(), truth, config.evaluation, result.keyframe_frames)
     static = real & ~moving
     return {
-        "sequence": job["sequence"],
-        "seed": job["seed"],
-        "moving_fraction": job["fraction"],
-        "detector": job["mode"],
         "loop_precision": loops["precision"],
         "loop_recall": loops["recall"],
         "closures": loops["accepted"],
@@ -164,6 +147,20 @@ def run_drive(job: dict) -> dict:
     }
 
 
+def _overrides(fractions: list[float], modes: list[str]) -> dict[str, tuple[float, str, dict]]:
+    """Override name -> (moving fraction, mode, config sections), in the order of the rows."""
+    overrides = {}
+    for fraction in fractions:
+        for mode in modes:
+            sections = {"simulator": {"world": {"moving_fraction": fraction}}}
+            overrides[f"{fraction:g} {mode}"] = (
+                fraction,
+                mode,
+                sections | {"moving_objects": {"enabled": mode == "on"}},
+            )
+    return overrides
+
+
 def run_part(bench: harness.Run, args: argparse.Namespace) -> dict:
     sequences = args.sequences or (["05"] if args.quick else SEQUENCES)
     fractions = args.fractions or ([0.0, 0.2] if args.quick else FRACTIONS)
@@ -171,18 +168,36 @@ def run_part(bench: harness.Run, args: argparse.Namespace) -> dict:
     profile = args.profiles[0] if args.profiles else "vo"
     detector = args.detectors[0] if args.detectors else "real"
     frames = QUICK_FRAMES if args.quick else None
-    with tempfile.TemporaryDirectory() as tmp:
-        drives = [
-            {"sequence": s, "seed": seed, "fraction": f, "profile": profile, "detector": detector,
-             "config": str(args.config) if args.config else None, "frames": frames,
-             "folder": str(Path(tmp) / f"{s}_{seed}_{f}")}
-            for s in sequences for seed in seeds for f in fractions
-        ]  # fmt: skip
-        with harness.pool(args.workers) as pool:
-            drives = pool.map(simulate_drive, drives, chunksize=1)
-        runs = [d | {"mode": mode} for d in drives for mode in args.modes]
-        with harness.pool(args.workers) as pool:
-            rows = pool.map(run_drive, runs, chunksize=1)
+    overrides = _overrides(fractions, args.modes)
+    spec = with_changes(
+        load_spec(SPEC),
+        sources=[{"kitti": s, **({"frames": frames} if frames else {})} for s in sequences],
+        noise=[profile],
+        detectors=[detector],
+        seeds=seeds,
+        data_root=data_root(),
+        metrics=["loop_recall", "ate_corrected_m", "moving_kept_out"],
+        **({"config": args.config.resolve()} if args.config else {}),
+    )
+    figures: dict[tuple, dict] = {}
+    for oracle in (False, True):  # the oracle is a measurement of its own: a sweep of its own
+        chosen = {name: o[2] for name, o in overrides.items() if (o[1] == "oracle") == oracle}
+        if not chosen:
+            continue
+        with run_spec(with_changes(spec, overrides=chosen), args, measure_oracle if oracle else measure) as sweep:
+            for record in sweep.records:
+                cell = record.cell
+                if record.status != "ok":
+                    print(f"- failed: {cell.source} seed {cell.seed} {cell.override}: {record.error}")
+                    continue
+                figures[(cell.source, cell.seed, cell.override)] = record.metrics
+    rows = [
+        {"sequence": s, "seed": seed, "moving_fraction": fraction, "detector": mode} | figures[(s, seed, name)]
+        for s in sequences
+        for seed in seeds
+        for name, (fraction, mode, _) in overrides.items()
+        if (s, seed, name) in figures
+    ]
     cut = f", first {frames} frames" if frames else ""
     print(
         f"## Moving objects: simulated KITTI {', '.join(sequences)} ({profile} odometry, {detector} "
