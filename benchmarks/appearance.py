@@ -570,7 +570,9 @@ def arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    bench = harness.start(__name__, __doc__, QUICK, arguments, argv, data=(("kitti_06_51",),))
+    bench = harness.start(
+        __name__, __doc__, QUICK, arguments, argv, data=(("kitti_06_51",), ("models", "yolox_nano_coco"))
+    )
     args = bench.args
     seeds = args.seeds or (QUICK_SEEDS if args.quick else SEEDS)
     config = NeoSLAMConfig()

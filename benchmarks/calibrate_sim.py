@@ -406,7 +406,9 @@ def _yaml_snippet(profile: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
-    bench = harness.start(__name__, __doc__, QUICK, arguments, argv, data=(("kitti_06_51",),))
+    bench = harness.start(
+        __name__, __doc__, QUICK, arguments, argv, data=(("kitti_06_51",), ("models", "yolox_nano_coco"))
+    )
     args = bench.args
     config = NeoSLAMConfig()
     run = run_real_front_end(data_root() / "kitti_06_51", config)

@@ -103,7 +103,9 @@ def arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    bench = harness.start(__name__, __doc__, QUICK, arguments, argv, data=(("kitti_06_51",),))
+    bench = harness.start(
+        __name__, __doc__, QUICK, arguments, argv, data=(("kitti_06_51",), ("models", "yolox_nano_coco"))
+    )
     args = bench.args
     base = NeoSLAMConfig()
     configs = {"YOLOX-Nano (default)": base}

@@ -94,7 +94,9 @@ def _ratio(simulated: float, real: float) -> float | None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    bench = harness.start(__name__, __doc__, QUICK, arguments, argv, data=(("kitti_06_51",),))
+    bench = harness.start(
+        __name__, __doc__, QUICK, arguments, argv, data=(("kitti_06_51",), ("models", "yolox_nano_coco"))
+    )
     args = bench.args
     seeds = args.seeds or (QUICK_SEEDS if args.quick else SEEDS)
     config = NeoSLAMConfig()

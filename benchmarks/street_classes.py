@@ -206,7 +206,9 @@ def arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    bench = harness.start(__name__, __doc__, QUICK, arguments, argv, data=(("kitti_06_51",),))
+    bench = harness.start(
+        __name__, __doc__, QUICK, arguments, argv, data=(("kitti_06_51",), ("models", "yolox_nano_coco"))
+    )
     args = bench.args
     config = NeoSLAMConfig()
     default_score = config.perception.detector.score_threshold
