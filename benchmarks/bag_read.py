@@ -5,7 +5,7 @@ one with the right camera's PNG files as CompressedImage) with the tests' writer
 input: the time to open it (for a bag: index every stamp and decode the first pair), the median time to read one
 stereo pair (several passes, the first a warm-up), its size, and whether every pixel equals the KITTI folder's.
 
-    python benchmarks/bag_read.py [--quick] [--json FILE]
+    python -m benchmarks.bag_read [--quick] [--out FILE]
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@
     decoded heading with the odometry yaw. Also run with NeuroSLAM's path integration (linear blend, lattice
     frame) for comparison.
 
-    python benchmarks/cells.py [--quick] [--json FILE]
+    python -m benchmarks.cells [--quick] [--out FILE]
 """
 
 from __future__ import annotations

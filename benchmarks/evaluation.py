@@ -1,9 +1,9 @@
 """Speed of the evaluation code on long sequences (a wall-time budget is a benchmark, not a test).
 
 true_revisits (which frames truly revisit a place, for loop recall) over a random walk of 5,000 frames (--quick:
-2,000), median of 5 runs. Budget: under 1 s for 5,000 frames (it was asserted in tests/evaluation/test_loops.py).
+2,000), median of 5 runs. Budget: under 1 s for 5,000 frames.
 
-    python benchmarks/evaluation.py [--quick] [--json FILE]
+    python -m benchmarks.evaluation [--quick] [--out FILE]
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 For each sequence, profile and seed: `neoslam simulate` (in-process) then `neoslam run`, and the odometry ATE,
 RPE and KITTI drift from metrics.json. Prints one row per run and the median over seeds.
 
-    python benchmarks/odometry.py [--quick] [--json FILE] [--sequences 05 00] [--seeds 1 2 3]
+    python -m benchmarks.odometry [--quick] [--out FILE] [--sequences 05 00] [--seeds 1 2 3] [--profiles vo heavy]
 """
 
 from __future__ import annotations
