@@ -124,6 +124,7 @@ def test_the_renderer_names_an_unknown_table_and_a_missing_result(tmp_path: Path
     assert "No stored result: run `python -m benchmarks.absent`" in text
 
 
+@pytest.mark.slow  # the first import brings in torch, OpenCV and the pipeline: seconds
 @pytest.mark.parametrize("name", harness.benchmark_names())
 def test_every_benchmark_imports_and_has_a_quick_mode(name: str) -> None:
     module = importlib.import_module(f"benchmarks.{name}")
