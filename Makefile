@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.setup-stamp
 
-.PHONY: setup demo test test-fast lint bench
+.PHONY: setup demo test test-fast lint bench bench-docs
 
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "make: $(PYTHON) not found; set PYTHON=/path/to/python3.11"; exit 2; }
@@ -32,5 +32,12 @@ test: lint
 test-fast: lint
 	$(BIN)/pytest -q -m "not slow"
 
+# every benchmark's quick mode (results in benchmarks/results/NAME.quick.json); `make bench-docs` puts the stored
+# default-mode results (benchmarks/results/NAME.json) into the pages of docs/benchmarks/
 bench: $(STAMP)
-	for b in benchmarks/*.py; do $(BIN)/python $$b --quick || exit 1; done
+	for b in $$($(BIN)/python -c "from benchmarks.harness import benchmark_names; print(*benchmark_names())"); do \
+		$(BIN)/python -m benchmarks.$$b --quick || exit 1; \
+	done
+
+bench-docs: $(STAMP)
+	$(BIN)/python -m benchmarks.render

@@ -110,10 +110,10 @@ def _places_tried(
     tried: set[int] = set()
     places = []
     minimum = detector.config.min_shared_triangles
-    for candidate, shared in detector._ordered_candidates(query, eligible):
+    for candidate, shared in detector.ordered_candidates(query, eligible):
         if candidate in tried:
             continue
-        members = detector._place(candidate, odometer).members
+        members = detector.place(candidate, odometer).members
         tried.update(members)
         places.append((members, shared is None or max(shared[detector.index.slot(m)] for m in members) >= minimum))
         if len(places) == RANKED_PLACES:
@@ -126,7 +126,7 @@ def _classify(
 ) -> tuple[str, int]:
     """The class of a missed revisit keyframe, and its true place's retrieval rank."""
     eligible = detector.index.eligible(keyframe.pose[:3, 3], odometer)
-    places = _places_tried(detector, detector._query_window(keyframe), eligible, odometer)
+    places = _places_tried(detector, detector.query_window(keyframe), eligible, odometer)
     rank = next((i for i, (members, _) in enumerate(places) if true_id in members), -1)
     matched = rank >= 0 and places[rank][1]
     if found is not None:
@@ -138,8 +138,8 @@ def _classify(
         return ("relocalised alone" if right else "relocalised elsewhere"), rank
     if not (0 <= rank < detector.config.candidates and matched):
         return "not retrieved", rank
-    query = detector._query_window(keyframe)
-    place = detector._place(true_id, odometer)
+    query = detector.query_window(keyframe)
+    place = detector.place(true_id, odometer)
     anchor = detector.index.keyframes[true_id]
     if _shared(query, place.keyframe, anchor, truth) < _required_matches(query, place.keyframe, detector.config):
         return "too few shared objects", rank

@@ -11,7 +11,7 @@ import numpy as np
 
 from neoslam.config import CameraConfig, NeoSLAMConfig
 from neoslam.datasets.kitti import read_kitti_sequence
-from neoslam.io.frames import camera_points_to_robot
+from neoslam.geometry import camera_points_to_robot
 from neoslam.perception.frontend import open_front_end
 from neoslam.types import Frame, ObjectObservation, Trajectory
 

@@ -16,8 +16,8 @@ SPECS = Path(__file__).resolve().parent / "specs"
 
 
 def sweep_options(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--out", type=Path, help="sweep folder to keep (and resume); default: a temporary one")
-    parser.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
+    """Beside the harness's --workers (local worker processes, one per core by default)."""
+    parser.add_argument("--sweep-dir", type=Path, help="sweep folder to keep (and resume); default: a temporary one")
     parser.add_argument("--ray", metavar="ADDRESS", help="run the cells as Ray tasks on this cluster")
 
 
@@ -29,12 +29,12 @@ def with_changes(spec: Spec, **changes) -> Spec:
 
 @contextmanager
 def run_spec(spec: Spec, args: argparse.Namespace, measure=None) -> Iterator[SweepResult]:
-    """Run the spec (the defaults of the config, whatever NEOSLAM_* variables are set) into --out or a temporary
-    folder, which lasts as long as the block."""
+    """Run the spec (the defaults of the config, whatever NEOSLAM_* variables are set) into --sweep-dir or a
+    temporary folder, which lasts as long as the block."""
     executor = make_executor(args.ray, args.workers)
     progress = sys.stderr.isatty()
-    if args.out is not None:
-        yield run_sweep(spec, args.out, executor, progress=progress, measure=measure, environ={})
+    if args.sweep_dir is not None:
+        yield run_sweep(spec, args.sweep_dir, executor, progress=progress, measure=measure, environ={})
         return
     with tempfile.TemporaryDirectory(prefix=f"{spec.name}-") as folder:
         yield run_sweep(spec, Path(folder) / "sweep", executor, progress=progress, measure=measure, environ={})

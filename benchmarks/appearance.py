@@ -9,7 +9,7 @@ the revisit real_streets.py builds (the frames played again through its photomet
 noise sigma 3, blur sigma 0.7 px, shift (1.3, -0.8) px). Poses come from the ground truth (a benchmark may use
 them; the SLAM path never does), so the front end runs without its stereo odometry, which does not change what it
 detects and places. Each placed observation goes to the world with its frame's ground-truth pose; observations of
-one label within 2.5 m (or 3 depth std) across frames are one object (benchmarks/_street.py), and objects placed in
+one label within 2.5 m (or 3 depth std) across frames are one object (benchmarks._street), and objects placed in
 at least 2 frames count. A third-pass observation belongs to the nearest first-pass object of its label within the
 same radius. Car pairs are compared:
 
@@ -42,26 +42,24 @@ the measurement only, at run time; no default changes.
 Last, row (a) split by how much the viewing distance changed between the two views, real against simulated: the
 real patch of a car changes with the view, the simulated one does not.
 
-    python benchmarks/appearance.py [--quick] [--json FILE] [--seeds 1 2 ...]  (default seeds 1-5)
+    python -m benchmarks.appearance [--quick] [--out FILE] [--seeds 1 2 ...]  (default seeds 1-5)
 """
 
 from __future__ import annotations
 
+import argparse
 import itertools
-import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 import cv2
 import numpy as np
 from scipy.stats import rankdata
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import neoslam.sim.world as sim_world  # noqa: E402
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from _street import (  # noqa: E402
+import neoslam.sim.world as sim_world
+from benchmarks import harness
+from benchmarks._street import (
     ASSOCIATION_RADIUS,
     ASSOCIATION_SIGMAS,
     MIN_REPEATS,
@@ -71,15 +69,16 @@ from _street import (  # noqa: E402
     depth_sigma,
     to_world,
 )
-from neoslam.config import NeoSLAMConfig, SimulatorConfig  # noqa: E402
-from neoslam.datasets.kitti import KittiSequence, read_kitti_sequence  # noqa: E402
-from neoslam.datasets.replay import ReplayedSequence, forward_back_forward  # noqa: E402
-from neoslam.jobs import simulation_config  # noqa: E402
-from neoslam.perception.frontend import open_front_end  # noqa: E402
-from neoslam.sim.simulator import simulate  # noqa: E402
-from neoslam.types import Frame, Trajectory  # noqa: E402
-from real_streets import THIRD_PASS  # noqa: E402
-from sim2real import ODOMETRY, _street_poses  # noqa: E402
+from benchmarks.harness import data_root
+from benchmarks.real_streets import THIRD_PASS
+from benchmarks.sim2real import ODOMETRY, _street_poses
+from neoslam.config import NeoSLAMConfig, SimulatorConfig
+from neoslam.datasets.kitti import KittiSequence, read_kitti_sequence
+from neoslam.datasets.replay import ReplayedSequence, forward_back_forward
+from neoslam.config.profiles import simulation_config
+from neoslam.perception.frontend import open_front_end
+from neoslam.sim.simulator import simulate
+from neoslam.types import Frame, Trajectory
 
 LABEL = "car"  # the matcher compares patches within a label; the street's objects are almost all cars
 SEEDS, QUICK_SEEDS = [1, 2, 3, 4, 5], [1, 2]
@@ -563,12 +562,18 @@ def _fit_table(real: np.ndarray, fits: dict[str, list[dict]], shown: int) -> lis
     return rows
 
 
-def _arguments(parser) -> None:
+QUICK = f"seeds {QUICK_SEEDS}, smaller grids of the appearance settings"
+
+
+def arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds", nargs="+", type=int, default=None, help="simulator seeds (default 1-5)")
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], _arguments)
+def main(argv: list[str] | None = None) -> None:
+    bench = harness.start(
+        __name__, __doc__, QUICK, arguments, argv, data=(("kitti_06_51",), ("models", "yolox_nano_coco"))
+    )
+    args = bench.args
     seeds = args.seeds or (QUICK_SEEDS if args.quick else SEEDS)
     config = NeoSLAMConfig()
     threshold = config.matching.appearance_rmse_threshold
@@ -611,10 +616,10 @@ def main() -> None:
         f"{real_stats['contrast']:.1f}\n"
     )
     real_rows = _real_table(real, threshold)
-    print(markdown_table(real_rows, list(real_rows[0])))
+    bench.table("real", real_rows, list(real_rows[0]))
     separation = _separation_table(sources)
     print()
-    print(markdown_table(separation, list(separation[0])))
+    bench.table("separation", separation, list(separation[0]))
     comparison = _comparison_table(sources, threshold)
     print(
         f"\nRMSE median (p10 to p90), grey levels; simulated: profile real, seeds {seeds}; car views of objects seen "
@@ -623,29 +628,28 @@ def main() -> None:
     columns = ["RMSE of", "real"]
     for source in settings:
         columns += [source, f"{source}: ratio"]
-    print(markdown_table(comparison, [*columns, f"share <= {threshold:g}"]))
+    bench.table("sim_vs_real", comparison, [*columns, f"share <= {threshold:g}"])
     for name, appearance in settings.items():
         print(f"{name}: {appearance.short()}")
     viewpoint = _viewpoint_table({"real": real, "sim texture fit": sources["sim texture fit"]})
     print(
         "\nrow (a) by the change of viewing distance between the two views, |d1 - d2| / min(d1, d2): median RMSE, ZNCC"
     )
-    print(markdown_table(viewpoint, list(viewpoint[0])))
+    bench.table("viewpoint", viewpoint, list(viewpoint[0]))
     fit_rows = _fit_table(real_targets, fits, 3)
     print(
         f"\nbest grid settings (first pass, seeds {grid_seeds}): largest deviation (the larger of sim / real and "
         "real / sim, less 1) over RMSE p10, median, p90 of (a) and (b), and for the texture grid the patch mean and "
         "contrast too"
     )
-    print(markdown_table(fit_rows, ["grid", "setting", "largest deviation", *TARGETS]))
+    bench.table("fit", fit_rows, ["grid", "setting", "largest deviation", *TARGETS])
     fitted = settings["sim config fit"]
     print(
         "\nas a --config file (detection fields only; the texture mean and contrast are constants of "
         "neoslam.sim.world):\nsimulator:\n  detection:\n"
         + "".join(f"    {k}: {v:g}\n" for k, v in fitted.detection_update().items())
     )
-    write_json(
-        args.json,
+    bench.finish(
         {
             "label": LABEL,
             "threshold": threshold,

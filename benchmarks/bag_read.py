@@ -6,24 +6,23 @@ one with the right camera's PNG files as CompressedImage) with the tests' writer
 first pair), the median time to read one stereo pair (several passes, the first a warm-up), its size, and whether
 every pixel equals the KITTI folder's.
 
-    python benchmarks/bag_read.py [--quick] [--json FILE]
+    python -m benchmarks.bag_read [--quick] [--out FILE]
 """
 
 from __future__ import annotations
 
 import importlib.util
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import REPO_ROOT, data_root, markdown_table, parse_args, write_json  # noqa: E402
-from neoslam.datasets.bag import open_bag  # noqa: E402
-from neoslam.datasets.kitti import read_kitti_sequence  # noqa: E402
-from neoslam.perception.config import BagConfig  # noqa: E402
+from benchmarks import harness
+from benchmarks.harness import REPO_ROOT, data_root
+from neoslam.datasets.bag import open_bag
+from neoslam.datasets.kitti import read_kitti_sequence
+from neoslam.config.perception import BagConfig
 
 PASSES, QUICK_PASSES = 4, 2
 BAGS = {  # name: (file or folder name, kind, right camera as CompressedImage)
@@ -60,8 +59,12 @@ def _read_times(sequence, passes: int) -> np.ndarray:
     return np.array(times)
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0])
+QUICK = f"{QUICK_PASSES - 1} timed pass instead of {PASSES - 1}"
+
+
+def main(argv: list[str] | None = None) -> None:
+    run = harness.start(__name__, __doc__, QUICK, argv=argv, data=(("kitti_06_51",),))
+    args = run.args
     passes = QUICK_PASSES if args.quick else PASSES
     root = data_root() / "kitti_06_51"
     start = time.perf_counter()
@@ -98,8 +101,8 @@ def main() -> None:
             )
             bag.close()
     print(f"{len(kitti)} stereo frames of kitti_06_51 (1226x370 grey), {passes - 1} timed passes\n")
-    print(markdown_table(rows, ["input", "open_ms", "pair_ms_median", "size_mb", "same_pixels"]))
-    write_json(args.json, {"frames": len(kitti), "rows": rows})
+    run.table("inputs", rows, ["input", "open_ms", "pair_ms_median", "size_mb", "same_pixels"])
+    run.finish({"frames": len(kitti), "rows": rows})
 
 
 if __name__ == "__main__":

@@ -23,24 +23,23 @@ detected when an observation of its frame has its centre inside the label's box.
 front end's own objects (a car it never places is not counted, and the detection probability is that of the objects
 it placed at least twice: the two go together, so the simulated detections per frame still match).
 
-Prints a table of the measurements and the profile as a Python snippet for `neoslam.sim.profiles` (and as YAML for
+Prints a table of the measurements and the profile as a Python snippet for `neoslam.config.calibration` (and as YAML for
 a `--config` file).
 
-    python benchmarks/calibrate_sim.py [--json FILE] [--labels FILE]
+    python -m benchmarks.calibrate_sim [--out FILE] [--labels FILE]
 """
 
 from __future__ import annotations
 
+import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import REPO_ROOT, data_root, markdown_table, parse_args, write_json  # noqa: E402
-from _street import (  # noqa: E402
+from benchmarks import harness
+from benchmarks._street import (
     MIN_REPEATS,
     RealRun,
     along_and_lateral,
@@ -48,10 +47,11 @@ from _street import (  # noqa: E402
     run_real_front_end,
     to_world,
 )
-from neoslam.config import DetectionNoiseConfig, NeoSLAMConfig, WorldConfig  # noqa: E402
-from neoslam.sim.detections import DetectionSimulator  # noqa: E402
-from neoslam.sim.visibility import column_offset  # noqa: E402
-from neoslam.sim.world import CLASS_SIZES, KERB_EXTRA, World  # noqa: E402
+from benchmarks.harness import REPO_ROOT, data_root
+from neoslam.config import DetectionNoiseConfig, NeoSLAMConfig, WorldConfig
+from neoslam.sim.detections import DetectionSimulator
+from neoslam.sim.visibility import column_offset
+from neoslam.sim.world import CLASS_SIZES, KERB_EXTRA, World
 
 LABELS = REPO_ROOT / "tests" / "data" / "labels" / "kitti_06_51.json"
 DEPTH_EDGES = (1.0, 15.0, 25.0, 40.0, 60.0)  # m, bins of the detection-probability table
@@ -71,7 +71,10 @@ ROAD_CLEARANCE = 2.0  # m: a parked car's centre beside the driven car (two half
 DEFAULT_SPACING = WorldConfig().spacing
 
 
-def _arguments(parser) -> None:
+QUICK = "the whole fit (it has no smaller mode: 51 real frames, about a minute)"
+
+
+def arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--labels", type=Path, default=LABELS, help="hand labels of the vehicles (if present)")
 
 
@@ -402,8 +405,11 @@ def _yaml_snippet(profile: dict) -> str:
     return yaml.safe_dump(section, sort_keys=False, default_flow_style=None)
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], _arguments)
+def main(argv: list[str] | None = None) -> None:
+    bench = harness.start(
+        __name__, __doc__, QUICK, arguments, argv, data=(("kitti_06_51",), ("models", "yolox_nano_coco"))
+    )
+    args = bench.args
     config = NeoSLAMConfig()
     run = run_real_front_end(data_root() / "kitti_06_51", config)
     labels = _read_labels(args.labels)
@@ -427,20 +433,20 @@ def main() -> None:
             "disparity_samples",
         )
     ]
-    print(markdown_table(summary, ["measure", "value"]))
+    bench.table("summary", summary, ["measure", "value"])
     print()
-    print(markdown_table(result["tables"]["depth_bins"], ["bin", "object_frames", "placed"]))
+    bench.table("depth_bins", result["tables"]["depth_bins"], ["bin", "object_frames", "placed"])
     print()
-    print(markdown_table(result["tables"]["column_bins"], ["bin", "object_frames", "placed"]))
+    bench.table("column_bins", result["tables"]["column_bins"], ["bin", "object_frames", "placed"])
     print()
-    print(markdown_table(result["occlusion"], ["cover", "hidden_object_frames", "placed"]))
+    bench.table("occlusion", result["occlusion"], ["cover", "hidden_object_frames", "placed"])
     print()
-    print("# neoslam.sim.profiles, the `real` profile (python benchmarks/calibrate_sim.py):")
+    print("# neoslam.config.calibration, the `real` profile (python -m benchmarks.calibrate_sim):")
     print(_python_snippet(result["profile"]))
     print()
     print("# or as a --config file:")
     print(_yaml_snippet(result["profile"]))
-    write_json(args.json, result)
+    bench.finish(result)
 
 
 if __name__ == "__main__":

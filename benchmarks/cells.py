@@ -8,28 +8,26 @@
     decoded heading with the odometry yaw. Also run with NeuroSLAM's path integration (linear blend, lattice
     frame) for comparison.
 
-    python benchmarks/cells.py [--quick] [--json FILE]
+    python -m benchmarks.cells [--quick] [--out FILE]
 """
 
 from __future__ import annotations
 
 import math
 import statistics
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 from scipy.ndimage import correlate1d
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from neoslam.cells.attractor import attractor_dynamics, gaussian_kernel, transfer_function  # noqa: E402
-from neoslam.cells.grid_cells import GridCells, circular_difference  # noqa: E402
-from neoslam.cells.head_direction import HeadDirectionCells, wrap_angle  # noqa: E402
-from neoslam.config import GridCellConfig, HeadDirectionConfig  # noqa: E402
-from neoslam.geometry import yaw_of  # noqa: E402
-from neoslam.io.trajectory_files import read_kitti  # noqa: E402
+from benchmarks import harness
+from benchmarks.harness import data_root
+from neoslam.cells.attractor import attractor_dynamics, gaussian_kernel, transfer_function
+from neoslam.cells.grid_cells import GridCells, circular_difference
+from neoslam.cells.head_direction import HeadDirectionCells, wrap_angle
+from neoslam.config import GridCellConfig, HeadDirectionConfig
+from neoslam.geometry import yaw_of
+from neoslam.io.trajectory_files import read_kitti
 
 SEQUENCE = "05"
 TIMED_FRAMES, QUICK_TIMED_FRAMES = 1000, 200
@@ -163,8 +161,12 @@ def drift(frames: int | None, overrides: dict, label: str) -> dict | None:
     }
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0])
+QUICK = f"{QUICK_TIMED_FRAMES} timed frames and the drift over the first {QUICK_DRIFT_FRAMES} frames"
+
+
+def main(argv: list[str] | None = None) -> None:
+    run = harness.start(__name__, __doc__, QUICK, argv=argv)
+    args = run.args
     frames = QUICK_TIMED_FRAMES if args.quick else TIMED_FRAMES
     timing = [
         {"cells": "NeoSLAM (defaults)"} | time_frames(frames, {}),
@@ -184,18 +186,17 @@ def main() -> None:
     print(f"## (a) Speed: head-direction (36) + grid cells (36^3), step + decode, float32, {frames} frames\n")
     columns = ["cells", "frames", "motion", "ms_per_frame_median", "ms_per_frame_p95", "grid_cells_ms_median",
                "head_direction_ms_median"]  # fmt: skip
-    print(markdown_table(timing, columns))
-    print(f"\n{REFERENCE} Target: <= 2 ms per frame on this 2-core machine.\n")
-    print(markdown_table(settle, ["settle", "dtype", "ms_median"]))
-    print(f"\n## (b) Path-integration drift over KITTI {SEQUENCE} ground-truth odometry\n")
+    run.table("speed", timing, columns)
+    print(f"{REFERENCE} Target: <= 2 ms per frame on this 2-core machine.\n")
+    run.table("settle", settle, ["settle", "dtype", "ms_median"])
+    print(f"## (b) Path-integration drift over KITTI {SEQUENCE} ground-truth odometry\n")
     if drifts:
         columns = ["cells", "frames", "path_m", "final_position_error_m", "rms_position_error_m",
                    "final_error_percent", "final_heading_error_deg", "rms_heading_error_deg"]  # fmt: skip
-        print(markdown_table(drifts, columns))
+        run.table("drift", drifts, columns)
     else:
         print(f"KITTI poses not found under {data_root()} (set NEOSLAM_DATA): drift not measured.")
-    write_json(
-        args.json,
+    run.finish(
         {
             "ms_per_frame_median": timing[0]["ms_per_frame_median"],
             "timing": timing,

@@ -1,23 +1,20 @@
 """Speed of the evaluation code on long sequences (a wall-time budget is a benchmark, not a test).
 
 true_revisits (which frames truly revisit a place, for loop recall) over a random walk of 5,000 frames (--quick:
-2,000), median of 5 runs. Budget: under 1 s for 5,000 frames (it was asserted in tests/evaluation/test_loops.py).
+2,000), median of 5 runs. Budget: under 1 s for 5,000 frames.
 
-    python benchmarks/evaluation.py [--quick] [--json FILE]
+    python -m benchmarks.evaluation [--quick] [--out FILE]
 """
 
 from __future__ import annotations
 
 import statistics
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import markdown_table, parse_args, write_json  # noqa: E402
-from neoslam.evaluation import LoopCriteria, true_revisits  # noqa: E402
+from benchmarks import harness
+from neoslam.evaluation import LoopCriteria, true_revisits
 
 FRAMES, QUICK_FRAMES = 5000, 2000
 REPEATS = 5
@@ -42,11 +39,15 @@ def time_true_revisits(frames: int) -> dict:
     }
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0])
+QUICK = f"a random walk of {QUICK_FRAMES} frames"
+
+
+def main(argv: list[str] | None = None) -> None:
+    run = harness.start(__name__, __doc__, QUICK, argv=argv)
+    args = run.args
     rows = [time_true_revisits(QUICK_FRAMES if args.quick else FRAMES)]
-    print(markdown_table(rows, ["function", "frames", "revisits", "median_s", "within_budget"]))
-    write_json(args.json, {"rows": rows})
+    run.table("speed", rows, ["function", "frames", "revisits", "median_s", "within_budget"])
+    run.finish({"rows": rows})
 
 
 if __name__ == "__main__":

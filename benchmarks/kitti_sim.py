@@ -1,41 +1,51 @@
-"""The whole NeoSLAM pipeline on simulated KITTI drives: three steps beyond the paper, each on alone and together.
+"""The whole NeoSLAM pipeline on simulated KITTI drives: three steps beyond the paper, each on alone and together,
+and a closer look at each step.
 
-For each sequence, odometry noise profile, detection profile and seed: `neoslam simulate` on the real KITTI ground
-truth (a share --moving of the street's objects move: traffic in both directions, people walking), then `neoslam
-run` with the paper's relaxation, the pose graph without the steps (`baseline`: grid-cell check, cells
-recalled on every detected closure, no motion detection, no landmarks), each step on alone over it
-(`moving`: moving objects kept out of keyframes and the map; `gate`: the drift gate with the cells recalled on
-accepted closures; `landmarks`: objects as landmarks in iSAM2), and the three together (`all`, the defaults
-but for landmarks, which are off by default). Loop closures are judged within 5 m horizontally, 100 frames
-apart. The runs are one sweep, `benchmarks/specs/kitti_sim.yaml` (`neoslam sweep`; a drive's runs share its
-simulation): on a local pool, one worker per core, or on a Ray cluster (`--ray ADDRESS`); `--out DIR` keeps the
-sweep folder, and running again resumes it. Beside ATE, the translation RPE over 100 m of route
-(the evaluation's `rpe_delta`) per step. Timing columns are per run.
+Parts (`--parts`, default all four, in this order):
 
-    python benchmarks/kitti_sim.py [--quick] [--json FILE] [--sequences 05 08] [--profiles vo] [--seeds 1 2 3]
-                                   [--detectors real ideal] [--moving 0.2] [--config FILE.yaml] [--out DIR]
-                                   [--workers N] [--ray ADDRESS]
+- `steps`: for each sequence, odometry noise profile, detection profile and seed, `neoslam simulate` on the real KITTI
+  ground truth (a share --moving of the street's objects move: traffic in both directions, people walking), then
+  `neoslam run` with the paper's relaxation, the pose graph without the steps (`baseline`: grid-cell check, cells
+  recalled on every detected closure, no motion detection, no landmarks), each step on alone over it (`moving`:
+  moving objects kept out of keyframes and the map; `gate`: the drift gate with the cells recalled on accepted
+  closures; `landmarks`: objects as landmarks in iSAM2), and the three together (`all`, the defaults but for
+  landmarks, which are off by default). Loop closures are judged within 5 m horizontally, 100 frames apart. The runs
+  are one sweep, `benchmarks/specs/kitti_sim.yaml` (`neoslam sweep`; a drive's runs share its simulation): on a
+  local pool (--workers), or on a Ray cluster (`--ray ADDRESS`); `--sweep-dir DIR` keeps the sweep folder, and
+  running again resumes it. Beside ATE, the translation RPE over 100 m of route (the evaluation's `rpe_delta`) per
+  step. Timing columns are per run.
+- `moving`: the motion detector on streets with 0, 20 and 40 % of their objects moving, off, on and against an oracle
+  that removes the moving objects' detections (benchmarks._moving).
+- `gating`: the closure gates (the paper's grid-cell check, the drift gate, none) under `vo` and `heavy` odometry,
+  and a repeated-layout trap only a gate can stop (benchmarks._gating).
+- `landmarks`: objects as landmarks in the pose graph (iSAM2) against the pose graph without them
+  (benchmarks._landmarks).
 
-`--detectors`: the simulator's detection profiles (default: real, the street and detector calibrated to the real
-front end on KITTI 06, and ideal, a richer street and detector). `--moving`: share of moving objects
-(default 0.2: a fifth of the objects; 0 gives static streets). `--config`: the spec's `config`, a config file under
-every run (the steps' overrides over it), e.g. `benchmarks/specs/heavy_odometry.yaml`, the motion detector told how
-noisy `heavy` odometry is.
+    python -m benchmarks.kitti_sim [--quick] [--parts steps moving gating landmarks] [--sequences 05 08]
+                                   [--profiles vo] [--seeds 1 2 3] [--detectors real ideal] [--moving 0.2]
+                                   [--config FILE.yaml] [--sweep-dir DIR] [--workers N] [--ray ADDRESS] [--out FILE]
+
+`--sequences`, `--profiles`, `--seeds` and `--detectors` replace each part's own defaults (steps: 00 02 05 06 07 08,
+vo and heavy, seed 1, real and ideal; moving: 05 00, vo, seed 1, real; gating: 00 02 05 06 08, vo and heavy, seed 1;
+landmarks: 05 08 00 06, vo, seed 1, real and ideal; a part that takes one profile, seed or detector takes the first).
+`--moving`: share of moving objects in `steps` (default 0.2: a fifth of the objects; 0 gives static streets).
+`--config`: a config file under every run of `steps` and `moving` (the steps' overrides over it), e.g.
+`benchmarks/specs/heavy_odometry.yaml`, the motion detector told how noisy `heavy` odometry is.
 """
 
 from __future__ import annotations
 
+import argparse
 import statistics
-import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from _sweep import SPECS, run_spec, sweep_options, with_changes  # noqa: E402
-from neoslam.sim.profiles import DETECTION_PROFILES  # noqa: E402
-from neoslam.sweep import load_spec  # noqa: E402
+from benchmarks import _gating, _landmarks, _moving, harness
+from benchmarks._sweep import SPECS, run_spec, sweep_options, with_changes
+from benchmarks.harness import data_root
+from neoslam.config.calibration import DETECTION_PROFILES
+from neoslam.sweep import load_spec
 
-SEQUENCES = ["00", "02", "05", "06", "07", "08"]
+SEQUENCES = ["00", "02", "05", "06", "07", "08"]  # of the part `steps`
 PROFILES = ["vo", "heavy"]
 DETECTORS = ["real", "ideal"]
 SEEDS = [1]
@@ -44,14 +54,26 @@ SPEC = SPECS / "kitti_sim.yaml"  # overrides relaxation, baseline, moving, gate,
 STEPS = ["baseline", "moving", "gate", "landmarks", "all"]
 
 
-def _arguments(parser) -> None:
-    parser.add_argument("--sequences", nargs="+", default=SEQUENCES)
-    parser.add_argument("--profiles", nargs="+", default=PROFILES)
-    parser.add_argument("--seeds", nargs="+", type=int, default=SEEDS)
-    parser.add_argument("--detectors", nargs="+", default=DETECTORS, choices=sorted(DETECTION_PROFILES))
-    parser.add_argument("--moving", type=float, default=MOVING, help="share of the street's objects that move")
-    parser.add_argument("--config", type=Path, help="a config file whose values every run takes (see above)")
-    sweep_options(parser)
+PARTS = {"moving": _moving, "gating": _gating, "landmarks": _landmarks}  # beside `steps`, which is here
+QUICK = "steps on KITTI 05 (first seed); " + "; ".join(f"{name}: {part.QUICK}" for name, part in PARTS.items())
+
+
+def arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--parts", nargs="+", choices=["steps", *PARTS], default=["steps", *PARTS], help="which parts to run"
+    )
+    parser.add_argument("--sequences", nargs="+", help="KITTI sequences (default: each part's own)")
+    parser.add_argument("--profiles", nargs="+", help="odometry noise profiles (default: each part's own)")
+    parser.add_argument("--seeds", nargs="+", type=int, help="simulation seeds (default: each part's own)")
+    parser.add_argument(
+        "--detectors", nargs="+", choices=sorted(DETECTION_PROFILES), help="detection profiles (default: each part's)"
+    )
+    parser.add_argument("--config", type=Path, help="a config file under every run of steps and moving (see above)")
+    group = parser.add_argument_group("steps")
+    group.add_argument("--moving", type=float, default=MOVING, help="steps: share of the street's objects that move")
+    sweep_options(group)
+    for name, part in PARTS.items():
+        part.arguments(parser.add_argument_group(name))
 
 
 def _on_street(overrides: dict, moving: float) -> dict:
@@ -133,15 +155,17 @@ def _medians(rows: list[dict], keys: list[str]) -> list[dict]:
     return summary
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], _arguments)
-    sequences, seeds = (["05"], args.seeds[:1]) if args.quick else (args.sequences, args.seeds)
+def run_steps(bench: harness.Run, args: argparse.Namespace) -> dict:
+    """Part `steps`: the sweep of the spec."""
+    all_seeds = args.seeds or SEEDS
+    sequences, seeds = (["05"], all_seeds[:1]) if args.quick else (args.sequences or SEQUENCES, all_seeds)
+    profiles, detectors = args.profiles or PROFILES, args.detectors or DETECTORS
     spec = load_spec(SPEC)
     spec = with_changes(
         spec,
         sources=[{"kitti": sequences}],
-        noise=args.profiles,
-        detectors=args.detectors,
+        noise=profiles,
+        detectors=detectors,
         seeds=seeds,
         overrides=_on_street(spec.overrides, args.moving),
         data_root=data_root(),
@@ -150,27 +174,37 @@ def main() -> None:
     with run_spec(spec, args) as sweep:
         rows, errors = _drives(sweep.records)
         summary = sweep.summary
-    order = {"sequence": sequences, "detector": args.detectors, "profile": args.profiles}
+    order = {"sequence": sequences, "detector": detectors, "profile": profiles}
     rows.sort(key=lambda r: (*(order[k].index(r[k]) for k in order), r["seed"]))
     if errors:
         print("Failed runs (left out):\n\n" + "\n".join(f"- {e}" for e in errors) + "\n")
-    print(f"Streets with {args.moving:.0%} of their objects moving. Corrected ATE RMSE (m, SE(3)-aligned):\n")
+    title = f"Streets with {args.moving:.0%} of their objects moving. Corrected ATE RMSE (m, SE(3)-aligned):"
     ate = ["ate_odometry_m", "ate_relaxation_m", *(f"ate_{step}_m" for step in STEPS)]
-    print(markdown_table(rows, ["sequence", "detector", "profile", "seed", "frames", *ate]))
+    bench.table("steps_ate", rows, ["sequence", "detector", "profile", "seed", "frames", *ate], title=title)
     rpe = ["rpe_odometry_m", "rpe_relaxation_m", *(f"rpe_{step}_m" for step in STEPS)]
-    print("\nTranslation RPE RMSE over 100 m of route (m):\n")
-    print(markdown_table(rows, ["sequence", "detector", "profile", "seed", *rpe]))
+    title = "Translation RPE RMSE over 100 m of route (m):"
+    bench.table("steps_rpe", rows, ["sequence", "detector", "profile", "seed", *rpe], title=title)
     loops = [f"{kind}_{step}" for step in ("baseline", "moving", "all") for kind in ("loops", "false", "recall")]
-    print("\nLoop closures (accepted, false, recall), map objects and speed:\n")
+    title = "Loop closures (accepted, false, recall), map objects and speed:"
     speed = ["objects_baseline", "objects_all", "fps_baseline", "fps_landmarks", "fps_all", "ms_per_frame_p95_all",
              "backend_s_baseline", "backend_s_landmarks"]  # fmt: skip
-    print(markdown_table(rows, ["sequence", "detector", "profile", "seed", *loops, *speed]))
+    bench.table("steps_loops", rows, ["sequence", "detector", "profile", "seed", *loops, *speed], title=title)
     if len(seeds) > 1:
         keys = [*ate, *rpe, *loops, *speed]
-        print("\nMedian over seeds:\n")
-        print(markdown_table(_medians(rows, keys), ["sequence", "detector", "profile", "seeds", *keys]))
-    print("\n" + summary.replace("# Sweep", "Sweep", 1))
-    write_json(args.json, {"moving_fraction": args.moving, "rows": rows, "medians": _medians(rows, [*ate, *rpe])})
+        columns = ["sequence", "detector", "profile", "seeds", *keys]
+        bench.table("steps_medians", _medians(rows, keys), columns, title="Median over seeds:")
+    print(summary.replace("# Sweep", "Sweep", 1))
+    return {"moving_fraction": args.moving, "rows": rows, "medians": _medians(rows, [*ate, *rpe])}
+
+
+def main(argv: list[str] | None = None) -> None:
+    bench = harness.start(__name__, __doc__, QUICK, arguments, argv, data=(("kitti", "poses"),))
+    args = bench.args
+    figures = {}
+    for name in args.parts:
+        print(f"# Part {name}\n", flush=True)
+        figures[name] = run_steps(bench, args) if name == "steps" else PARTS[name].run_part(bench, args)
+    bench.finish(figures)
 
 
 if __name__ == "__main__":

@@ -16,12 +16,12 @@
     (every stored keyframe a candidate: a later session, a lost robot); the retrieval index's memory; and at the
     largest map also with the exact eigenvector (power iteration run to 1e-9, at most 100 products).
 
-    python benchmarks/loops.py [--quick] [--seeds N ...] [--sequences 08 town ...] [--profile vo|heavy]
-                               [--config FILE.yaml] [--json FILE] [--out DIR] [--workers N] [--ray ADDRESS]
+    python -m benchmarks.loops [--quick] [--seeds N ...] [--sequences 08 town ...] [--profile vo|heavy]
+                               [--config FILE.yaml] [--out FILE] [--sweep-dir DIR] [--workers N] [--ray ADDRESS]
 
 The drives of (a) are one sweep, `benchmarks/specs/loops.yaml` (`neoslam sweep`, with this file's `measure` as each
 cell's measurement): on a local pool, one worker per core, or Ray tasks (`--ray`: the workers need this folder on
-their PYTHONPATH); `--out DIR` keeps the sweep folder, and running again resumes it.
+their PYTHONPATH); `--sweep-dir DIR` keeps the sweep folder, and running again resumes it.
 
 Seeds 1-10 were looked at while the verification was designed (the contradiction and heading-drift checks);
 seeds 11 and up were not: `--seeds 11 12 13 14 15 16` measures on drives held out from that design.
@@ -29,6 +29,7 @@ seeds 11 and up were not: `--seeds 11 12 13 14 15 16` measures on drives held ou
 
 from __future__ import annotations
 
+import argparse
 import pickle
 import statistics
 import sys
@@ -38,20 +39,20 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from _loop_misses import CLASSES as MISS_CLASSES  # noqa: E402
-from _loop_misses import replay  # noqa: E402
-from _sweep import SPECS, run_spec, sweep_options, with_changes  # noqa: E402
-from neoslam.config import MatchingConfig, NeoSLAMConfig, load_config  # noqa: E402
-from neoslam.datasets.simulated import read_dataset  # noqa: E402
-from neoslam.evaluation.loops import LoopCriteria, evaluate_closures, judge_closures  # noqa: E402
-from neoslam.geometry import invert_pose, rotation_angle  # noqa: E402
-from neoslam.loop.detector import LoopClosureDetector  # noqa: E402
-from neoslam.loop.matching import contradictions  # noqa: E402
-from neoslam.pipeline import NeoSLAM  # noqa: E402
-from neoslam.sweep import load_spec  # noqa: E402
-from neoslam.types import Keyframe  # noqa: E402
+from benchmarks import harness
+from benchmarks._loop_misses import CLASSES as MISS_CLASSES
+from benchmarks._loop_misses import replay
+from benchmarks._sweep import SPECS, run_spec, sweep_options, with_changes
+from benchmarks.harness import data_root
+from neoslam.config import KeyframeConfig, MatchingConfig, NeoSLAMConfig, load_config
+from neoslam.datasets.simulated import read_dataset
+from neoslam.evaluation.loops import LoopCriteria, evaluate_closures, judge_closures
+from neoslam.geometry import invert_pose, rotation_angle
+from neoslam.loop.detector import LoopClosureDetector
+from neoslam.loop.matching import contradictions
+from neoslam.pipeline import NeoSLAM
+from neoslam.sweep import load_spec
+from neoslam.types import Keyframe, LoopClosure
 
 SEQUENCES = ["00", "02", "05", "06", "08"]
 SEEDS = [1, 2, 3, 4, 5, 6]
@@ -76,28 +77,33 @@ def _drive(config: NeoSLAMConfig, data: Path) -> tuple[NeoSLAM, np.ndarray, list
     """Run the pipeline on a dataset; returns it, the true poses, the wall time of each loop query and the ids of
     the keyframes the detector relocalised."""
     dataset = read_dataset(data)
-    slam = NeoSLAM(_every_keyframe_stored(config))
-    detector = slam.loop_detector
-    detector_query, detector_relocalise = detector.query, detector.relocalise
-    query_times: list[float] = []
-    relocalised: set[int] = set()
-
-    def timed_query(keyframe, odometer):
-        start = time.perf_counter()
-        accepted = detector_query(keyframe, odometer)
-        query_times.append(time.perf_counter() - start)
-        return accepted
-
-    def recorded_relocalise(keyframe, odometer):
-        found = detector_relocalise(keyframe, odometer)
-        if found is not None:
-            relocalised.add(keyframe.id)
-        return found
-
-    detector.query, detector.relocalise = timed_query, recorded_relocalise  # observed, the pipeline untouched
+    config = _every_keyframe_stored(config)
+    slam = NeoSLAM(config)
+    detector = slam.loop_detector = _ObservedDetector(config.keyframes, config.matching)
     for frame in dataset.frames():
         slam.step(frame)
-    return slam, dataset.ground_truth.poses, query_times, relocalised
+    return slam, dataset.ground_truth.poses, detector.query_times, detector.relocalised
+
+
+class _ObservedDetector(LoopClosureDetector):
+    """The pipeline's loop detector, unchanged, that also times each query and notes the keyframes it relocalised."""
+
+    def __init__(self, keyframes: KeyframeConfig, matching: MatchingConfig) -> None:
+        super().__init__(keyframes, matching)
+        self.query_times: list[float] = []
+        self.relocalised: set[int] = set()
+
+    def query(self, keyframe: Keyframe, odometer_m: float) -> list[LoopClosure]:
+        start = time.perf_counter()
+        accepted = super().query(keyframe, odometer_m)
+        self.query_times.append(time.perf_counter() - start)
+        return accepted
+
+    def relocalise(self, keyframe: Keyframe, odometer_m: float):
+        found = super().relocalise(keyframe, odometer_m)
+        if found is not None:
+            self.relocalised.add(keyframe.id)
+        return found
 
 
 def _judge(slam: NeoSLAM, truth: np.ndarray, horizontal: bool) -> dict:
@@ -236,7 +242,7 @@ def _speed_row(
 
 def query_speed(drives: list[list[Keyframe]], sizes: list[int], queries: int) -> list[dict]:
     """A row per map size and scope with the default matching, then one at the largest size with the exact
-    eigenvector; the map is laid from the drives' keyframes (benchmarks/loops.py (b))."""
+    eigenvector; the map is laid from the drives' keyframes (benchmarks.loops (b))."""
     matching = load_config(environ={}).matching
     stream = _tiled(drives, max(sizes))
     rows = [
@@ -301,7 +307,10 @@ def checks_seen(unchecked: list[dict], limit: int) -> dict:
     }
 
 
-def _options(parser) -> None:
+QUICK = "KITTI 05, 08 and the town route, seed 1; smaller maps and fewer queries for the speed"
+
+
+def arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds", type=int, nargs="+", help=f"simulation seeds (default {SEEDS}; 11 and up held out)")
     parser.add_argument("--profile", default="vo", help="odometry noise profile of the simulated drives (default vo)")
     parser.add_argument(
@@ -321,8 +330,9 @@ def misses_table(runs: list[dict]) -> list[dict]:
     return rows
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], _options)
+def main(argv: list[str] | None = None) -> None:
+    bench = harness.start(__name__, __doc__, QUICK, arguments, argv, data=(("kitti", "poses"),))
+    args = bench.args
     sequences = args.sequences or (["05", "08", "town"] if args.quick else [*SEQUENCES, "town"])
     base = load_config(args.config, environ={})
     seeds = args.seeds or (SEEDS[:1] if args.quick else SEEDS)
@@ -351,7 +361,7 @@ def main() -> None:
                 variants[record.cell.override].append(drive | metrics)
         runs, paper, unchecked = (variants[name] for name in VARIANTS)
         if not (runs and paper and unchecked):
-            sys.exit("loops.py: a variant has no drive that ran (the errors above; tracebacks in the cells' error.txt)")
+            sys.exit("loops: a variant has no drive that ran (the errors above; tracebacks in the cells' error.txt)")
         drives = []
         for run in runs:
             with (run["_folder"] / "results" / "keyframes.pkl").open("rb") as handle:
@@ -367,43 +377,42 @@ def main() -> None:
           "judged within 5 m horizontally, "
           "100 frames apart\n")  # fmt: skip
     print(f"Our keyframes: objects within {runs[0]['neighbourhood_m']:.1f} m of the current object.\n")
-    print(markdown_table(public, columns))
-    print(f"\nPer sequence over seeds {', '.join(map(str, seeds))}:\n")
+    bench.table("drives", public, columns)
+    print(f"Per sequence over seeds {', '.join(map(str, seeds))}:\n")
     summary_columns = ["sequence", "seeds", "accepted", "false_positive", "precision", "recall_min",
                        "recall_median", "recall_max"]  # fmt: skip
-    print(markdown_table(summary(public), summary_columns))
-    print(f"\nThe paper's keyframes: objects within {paper[0]['neighbourhood_m']:.1f} m (e_max), no minimum count.\n")
-    print(markdown_table(paper_public, [*columns[:3], "max_objects", *columns[3:]]))
-    print("\n" + _paper_note(paper, base))
+    bench.table("summary", summary(public), summary_columns)
+    print(f"The paper's keyframes: objects within {paper[0]['neighbourhood_m']:.1f} m (e_max), no minimum count.\n")
+    bench.table("paper_keyframes", paper_public, [*columns[:3], "max_objects", *columns[3:]])
+    print(_paper_note(paper, base))
     unchecked_public = [{k: v for k, v in r.items() if not k.startswith("_")} for r in unchecked]
     limit = base.matching.max_contradictions
     seen = checks_seen(unchecked, limit)
     print("\nWithout the contradiction and heading-drift checks:\n")
-    print(markdown_table(summary(unchecked_public), summary_columns))
+    bench.table("without_last_checks", summary(unchecked_public), summary_columns)
     print(
-        f"\nThere, {seen['false_closures']} false closures on {seen['false_closure_drives']} drives, with "
+        f"There, {seen['false_closures']} false closures on {seen['false_closure_drives']} drives, with "
         f"{seen['false_contradictions']} contradicted objects and turned by {seen['false_yaw_deg']}°; of "
         f"{seen['true_closures']} true closures, {seen['true_without_contradiction']:.1%} have no contradicted object "
         f"and {seen['true_within_limit']:.1%} at most {limit}; the true fits turn at most "
         f"{seen['true_max_yaw_deg_per_100m']:.2f}° per 100 m travelled."
     )
     misses = misses_table(runs)
-    print("\nMissed revisit keyframes, by why (see benchmarks/_loop_misses.py):\n")
-    print(markdown_table(misses, ["sequence", *MISS_CLASSES]))
+    print("\nMissed revisit keyframes, by why (see benchmarks._loop_misses):\n")
+    bench.table("misses", misses, ["sequence", *MISS_CLASSES])
     print("\n## (b) Query time (retrieval + matching + verification) against map size\n")
     speed_columns = ["eigenvector", "scope", "map_size", "queries", "eligible_median", "revisit_ms_median",
                      "new_place_ms_median", "query_ms_median", "query_ms_p95", "index_mb"]  # fmt: skip
-    print(markdown_table(speed, speed_columns))
+    bench.table("speed", speed, speed_columns)
     largest = next(row for row in speed if row["eigenvector"] == "default" and row["map_size"] == max(sizes))
     whole = next(row for row in speed if row["scope"] == "whole map" and row["map_size"] == max(sizes))
     print(
-        f"\nAt {largest['map_size']} keyframes: median {largest['query_ms_median']:.2f} ms, new places "
+        f"At {largest['map_size']} keyframes: median {largest['query_ms_median']:.2f} ms, new places "
         f"{largest['new_place_ms_median']:.2f} ms, revisits {largest['revisit_ms_median']:.2f} ms; searching the "
         f"whole map: median {whole['query_ms_median']:.2f} ms; retrieval index {whole['index_mb']:.1f} MB."
     )
     print("\n" + sweep_summary.replace("# Sweep", "Sweep", 1))
-    write_json(
-        args.json,
+    bench.finish(
         {
             "query_ms_median": largest["query_ms_median"],
             "new_place_ms_median": largest["new_place_ms_median"],

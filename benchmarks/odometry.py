@@ -3,24 +3,28 @@
 For each sequence, profile and seed: `neoslam simulate` (in-process) then `neoslam run`, and the odometry ATE,
 RPE and KITTI drift from metrics.json. Prints one row per run and the median over seeds.
 
-    python benchmarks/odometry.py [--quick] [--json FILE] [--sequences 05 00] [--seeds 1 2 3]
+    python -m benchmarks.odometry [--quick] [--out FILE] [--sequences 05 00] [--seeds 1 2 3] [--profiles vo heavy]
 """
 
 from __future__ import annotations
 
+import argparse
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from neoslam.config import NOISE_PROFILES, load_config  # noqa: E402
-from neoslam.jobs import record, run_dataset, simulate_dataset, simulation_config  # noqa: E402
+from benchmarks import harness
+from benchmarks.harness import data_root
+from neoslam.config import NOISE_PROFILES, load_config
+from neoslam.commands.simulate import record, simulate_dataset
+from neoslam.commands.run import run_dataset
+from neoslam.config.profiles import simulation_config
+
+QUICK = "seed 1 only"
 
 
-def _arguments(parser) -> None:
+def arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sequences", nargs="+", default=["05"])
     parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3])
     parser.add_argument("--profiles", nargs="+", default=list(NOISE_PROFILES))
@@ -49,8 +53,9 @@ def measure(sequence: str, profile: str, seed: int, workdir: Path) -> dict:
     }
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], _arguments)
+def main(argv: list[str] | None = None) -> None:
+    run = harness.start(__name__, __doc__, QUICK, arguments, argv, data=(("kitti", "poses"),))
+    args = run.args
     seeds = args.seeds[:1] if args.quick else args.seeds
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -71,16 +76,14 @@ def main() -> None:
             )
     columns = ["sequence", "profile", "seed", "frames", "ate_odometry_m", "rpe_100m_m", "kitti_t_percent",
                "kitti_r_deg_100m", "simulate_s", "run_s"]  # fmt: skip
-    print(markdown_table(rows, columns))
-    print()
-    print("Median over seeds:")
-    print(
-        markdown_table(
-            medians,
-            ["sequence", "profile", "seeds", "ate_odometry_m", "rpe_100m_m", "kitti_t_percent", "kitti_r_deg_100m"],
-        )
+    run.table("runs", rows, columns)
+    run.table(
+        "medians",
+        medians,
+        ["sequence", "profile", "seeds", "ate_odometry_m", "rpe_100m_m", "kitti_t_percent", "kitti_r_deg_100m"],
+        title="Median over seeds:",
     )
-    write_json(args.json, {"runs": rows, "medians": medians})
+    run.finish({"runs": rows, "medians": medians})
 
 
 if __name__ == "__main__":

@@ -17,19 +17,19 @@ Each cell simulates a drive (`neoslam simulate`: odometry profile --profile, det
    objects' covariances; no evidence test), `no places` (a retrieved keyframe matched alone, the query alone),
    `signature` (retrieval by the label and distance histogram instead of object triangles), and `unlimited radius`.
    Detector-level recall and false closures; for the defaults, the missed revisit keyframes by stage
-   (benchmarks/_loop_misses.py); for the defaults and the unlimited radius, the retrieval rank of the true place.
+   (benchmarks._loop_misses); for the defaults and the unlimited radius, the retrieval rank of the true place.
 
-    python benchmarks/places.py [--quick] [--seeds 1 2 3] [--sequences 00 05 town] [--profile vo|heavy]
-                                [--detector real|ideal] [--moving 0.2] [--config FILE.yaml] [--json FILE]
-                                [--out DIR] [--workers N] [--ray ADDRESS]
+    python -m benchmarks.places [--quick] [--seeds 1 2 3] [--sequences 00 05 town] [--profile vo|heavy]
+                                [--detector real|ideal] [--moving 0.2] [--config FILE.yaml] [--out FILE]
+                                [--sweep-dir DIR] [--workers N] [--ray ADDRESS]
 
-Default: KITTI 00, 02, 05, 06, 08 and the town route (its repeated-layout trap), seeds 1-3, `vo`, `real`, static
-streets. The documented figures (docs/benchmarks/places.md) are medians over seeds 1-6 (`--seeds 1 2 3 4 5 6`, about
-50 min on 2 cores).
+Default: KITTI 00, 02, 05, 06, 08 and the town route (its repeated-layout trap), seeds 1-6 (36 drives, about 25 min
+on 2 cores), `vo`, `real`, static streets.
 """
 
 from __future__ import annotations
 
+import argparse
 import statistics
 import sys
 import time
@@ -38,23 +38,24 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from _loop_misses import CLASSES, replay  # noqa: E402
-from _sweep import SPECS, run_spec, sweep_options, with_changes  # noqa: E402
-from neoslam.config import NeoSLAMConfig, load_config  # noqa: E402
-from neoslam.datasets.simulated import read_dataset  # noqa: E402
-from neoslam.evaluation.loops import LoopCriteria, evaluate_closures, true_revisits  # noqa: E402
-from neoslam.evaluation.report import loop_metrics  # noqa: E402
-from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error  # noqa: E402
-from neoslam.geometry import invert_pose  # noqa: E402
-from neoslam.loop.detector import LoopClosureDetector  # noqa: E402
-from neoslam.pipeline import NeoSLAM  # noqa: E402
-from neoslam.sweep import load_spec  # noqa: E402
-from neoslam.types import Keyframe, LoopClosure  # noqa: E402
+from benchmarks import harness
+from benchmarks._loop_misses import CLASSES, replay
+from benchmarks._sweep import SPECS, run_spec, sweep_options, with_changes
+from benchmarks.harness import data_root
+from neoslam.config import NeoSLAMConfig, load_config
+from neoslam.datasets.simulated import read_dataset
+from neoslam.evaluation.loops import LoopCriteria, evaluate_closures, true_revisits
+from neoslam.evaluation.report import loop_metrics
+from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
+from neoslam.geometry import invert_pose
+from neoslam.loop.detector import LoopClosureDetector
+from neoslam.loop.keyframes import KeyframeStep
+from neoslam.pipeline import NeoSLAM
+from neoslam.sweep import load_spec
+from neoslam.types import Keyframe, LoopClosure
 
 SEQUENCES = ["00", "02", "05", "06", "08", "town"]
-SEEDS, QUICK_SEEDS = [1, 2, 3], [1]
+SEEDS, QUICK_SEEDS = [1, 2, 3, 4, 5, 6], [1]
 SPEC = SPECS / "places.yaml"
 UNLIMITED_M = 1e5  # matching.search_radius that takes every stored keyframe
 VARIANTS = {
@@ -106,15 +107,12 @@ def _run(config: NeoSLAMConfig, dataset, detector: LoopClosureDetector | None = 
     if detector is not None:
         slam.loop_detector = detector
     made: list[tuple[Keyframe, float]] = []
-    build = slam.keyframes.add
 
-    def recorded(*args, **kwargs):
-        keyframe = build(*args, **kwargs)
-        if keyframe is not None:
-            made.append((keyframe, slam.keyframes.odometer_m))
-        return keyframe
+    def recorded(step: KeyframeStep) -> None:
+        if step.keyframe is not None:
+            made.append((step.keyframe, step.odometer_m))
 
-    slam.keyframes.add = recorded  # observed, the pipeline untouched
+    slam.keyframes.observers.append(recorded)
     start = time.perf_counter()
     for frame in dataset.frames():
         slam.step(frame)
@@ -239,7 +237,10 @@ def tables(runs: list[dict]) -> dict[str, list[dict]]:
     return {"pipeline": rows, "variants": variants, "stages": stages}
 
 
-def _options(parser) -> None:
+QUICK = "KITTI 05 and the town route, seed 1"
+
+
+def arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds", type=int, nargs="+", help=f"simulation seeds (default {SEEDS})")
     parser.add_argument("--sequences", nargs="+", help=f"drives (default {' '.join(SEQUENCES)})")
     parser.add_argument("--profile", default="vo", help="odometry noise profile (default vo)")
@@ -249,8 +250,9 @@ def _options(parser) -> None:
     sweep_options(parser)
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], _options)
+def main(argv: list[str] | None = None) -> None:
+    run = harness.start(__name__, __doc__, QUICK, arguments, argv, data=(("kitti", "poses"),))
+    args = run.args
     sequences = args.sequences or (["05", "town"] if args.quick else SEQUENCES)
     seeds = args.seeds or (QUICK_SEEDS if args.quick else SEEDS)
     changes = {"config": args.config.resolve()} if args.config is not None else {}
@@ -273,7 +275,7 @@ def main() -> None:
             if record.status == "ok":
                 runs.append({"sequence": record.cell.source, "seed": record.cell.seed, **dict(record.metrics)})
     if not runs:
-        sys.exit("places.py: no drive ran (the errors above; tracebacks in the cells' error.txt)")
+        sys.exit("places: no drive ran (the errors above; tracebacks in the cells' error.txt)")
     base = load_config(args.config, environ={})
     out = tables(runs)
     street = f"{args.moving:.0%} of objects moving" if args.moving else "static streets"
@@ -281,15 +283,15 @@ def main() -> None:
     print("Pipeline (defaults): loop recall at the keyframes' frames (median and min over seeds, and pooled), false")
     print("closures (summed), the same with the search radius unlimited, and ATE RMSE (m, SE(3)-aligned, medians) of")
     print("the odometry, the corrected map and the oracle floor (every true revisit closed at its true pose):\n")
-    print(markdown_table(out["pipeline"], list(out["pipeline"][0])))
-    print("\nLoop detector replayed over the same keyframes (every keyframe stored), each step off in turn; recall")
+    run.table("pipeline", out["pipeline"], list(out["pipeline"][0]))
+    print("Loop detector replayed over the same keyframes (every keyframe stored), each step off in turn; recall")
     print("pooled, false closures summed:\n")
-    print(markdown_table(out["variants"], list(out["variants"][0])))
-    print("\nRevisit keyframes the detector (defaults) missed, by stage, as shares of the revisit keyframes; and how")
+    run.table("variants", out["variants"], list(out["variants"][0]))
+    print("Revisit keyframes the detector (defaults) missed, by stage, as shares of the revisit keyframes; and how")
     print(f"often the true place is the first retrieved, or among the first {base.matching.candidates} places (also")
     print("with the search radius unlimited: every stored keyframe a candidate):\n")
-    print(markdown_table(out["stages"], list(out["stages"][0])))
-    write_json(args.json, {"runs": runs, **out})
+    run.table("stages", out["stages"], list(out["stages"][0]))
+    run.finish({"runs": runs, **out})
 
 
 if __name__ == "__main__":

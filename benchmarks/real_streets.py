@@ -1,4 +1,5 @@
-"""The whole system on real KITTI images: keyframes along a real street, and a revisit that closes loops.
+"""The whole system on real KITTI images: keyframes along a real street, a revisit that closes loops, the detector
+against hand labels, and the front end's speed.
 
 (a) `kitti_06_51`, the 51 real stereo frames of KITTI 06 (60 m of a residential street) through the real front end
     (default detector, ORB stereo, stereo odometry) and the pipeline: detections and placed objects a frame,
@@ -10,28 +11,33 @@
     of the third pass's have a first-pass keyframe within 5 m to close to. This is the same street's images played
     again, not an independent second drive.
 
-Both with the default detector and, with --yolo11 (its weights are AGPL-3.0, read from the shared data, never part
-of NeoSLAM), with YOLO11n.
+(a) and (b) with the default detector and, with --yolo11 (its weights are AGPL-3.0, read from the shared data, never
+part of NeoSLAM), with YOLO11n.
 
-    python benchmarks/real_streets.py [--yolo11] [--json FILE]
+(c) Detection recall against hand labels on real frames, and (d) the front end's speed and odometry:
+benchmarks._perception. The machine should be otherwise idle: speed figures of a loaded 2-core machine are worth
+little (the result's stamp records the load).
+
+    python -m benchmarks.real_streets [--quick] [--parts street revisit detection speed] [--yolo11] [--out FILE]
+
+`--quick`: fewer timed passes of the front end in (d); the rest is as small as it is.
 """
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
+import argparse
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from neoslam.config import NeoSLAMConfig  # noqa: E402
-from neoslam.datasets.kitti import read_kitti_sequence  # noqa: E402
-from neoslam.datasets.replay import PhotometricChange, forward_back_forward  # noqa: E402
-from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error  # noqa: E402
-from neoslam.geometry import invert_pose  # noqa: E402
-from neoslam.perception.frontend import open_front_end  # noqa: E402
-from neoslam.pipeline import run  # noqa: E402
+from benchmarks import _perception, harness
+from benchmarks.harness import data_root
+from neoslam.config import NeoSLAMConfig
+from neoslam.datasets.kitti import read_kitti_sequence
+from neoslam.datasets.replay import PhotometricChange, forward_back_forward
+from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
+from neoslam.geometry import invert_pose
+from neoslam.perception.frontend import open_front_end
+from neoslam.pipeline import run
 
 THIRD_PASS = PhotometricChange(gain=0.8, offset=15.0, noise_sigma=3.0, blur_sigma=0.7, shift_x=1.3, shift_y=-0.8)
 TRUE_CLOSURE_M = 5.0
@@ -87,20 +93,44 @@ def _revisit_row(name: str, config: NeoSLAMConfig) -> dict:
     }
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], lambda p: p.add_argument("--yolo11", action="store_true"))
+QUICK = f"{_perception.QUICK_PASSES - 1} timed pass of the front end in (d) instead of {_perception.PASSES - 1}"
+PARTS = ["street", "revisit", "detection", "speed"]
+
+
+def arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--parts", nargs="+", choices=PARTS, default=PARTS, help="which parts to run (default all)")
+    parser.add_argument("--yolo11", action="store_true", help="(a) and (b) also with YOLO11n (AGPL-3.0 weights)")
+
+
+def main(argv: list[str] | None = None) -> None:
+    bench = harness.start(
+        __name__, __doc__, QUICK, arguments, argv, data=(("kitti_06_51",), ("models", "yolox_nano_coco"))
+    )
+    args = bench.args
     base = NeoSLAMConfig()
     configs = {"YOLOX-Nano (default)": base}
     if args.yolo11:
         detector = base.perception.detector.model_copy(update={"source": "yolo11"})
         perception = base.perception.model_copy(update={"detector": detector})
         configs["YOLO11n"] = base.model_copy(update={"perception": perception})
-    street = [_street_row(name, config) for name, config in configs.items()]
-    print(markdown_table(street, list(street[0])))
-    print()
-    revisit = [_revisit_row(name, config) for name, config in configs.items()]
-    print(markdown_table(revisit, list(revisit[0])))
-    write_json(args.json, {"street": street, "revisit": revisit})
+    figures = {}
+    if "street" in args.parts:
+        street = [_street_row(name, config) for name, config in configs.items()]
+        bench.table(
+            "street", street, list(street[0]), title="## (a) kitti_06_51 through the front end and the pipeline"
+        )
+        figures["street"] = street
+    if "revisit" in args.parts:
+        revisit = [_revisit_row(name, config) for name, config in configs.items()]
+        bench.table("revisit", revisit, list(revisit[0]), title="## (b) The revisit: forward, back, forward again")
+        figures["revisit"] = revisit
+    if "detection" in args.parts:
+        print("## (c) Detection against hand labels\n")
+        figures |= _perception.run_detection(bench, args)
+    if "speed" in args.parts:
+        print("## (d) The front end's speed\n")
+        figures |= _perception.run_speed(bench, args)
+    bench.finish(figures)
 
 
 if __name__ == "__main__":

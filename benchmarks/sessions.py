@@ -2,8 +2,8 @@
 
 Every run is `neoslam run DATA --out R --map FILE --quiet` in its own process, as a user would run it; the map files
 are read back with `neoslam.store.map_file.MapFile` and SQLite. Simulated drives: the real KITTI ground truth, `vo`
-odometry, the `real` detection profile (`neoslam.jobs.simulation_config`), sessions cut from one drive by
-`neoslam.sim.sessions.session_recordings` (one world of objects, each session from the identity with its own
+odometry, the `real` detection profile (`neoslam.config.profiles.simulation_config`), sessions cut from one drive by
+`neoslam.sim.session_drives.session_recordings` (one world of objects, each session from the identity with its own
 odometry and detection noise). Closures are judged in ground truth: true when the two frames lie within the
 evaluation's loop_max_distance (5 m, horizontally). Ground truth is read here for judging only.
 
@@ -33,15 +33,20 @@ evaluation's loop_max_distance (5 m, horizontally). Ground truth is read here fo
 6. A session that starts in the middle of the map: B = KITTI 05 frames 500-799 (its own noise, from the identity:
    no prior on where it is), run into A's map of part 1 (made here when part 1 did not run): the distance B drove
    from its first frame to its relocalisation, whether the relocalising closure is right, B's closures with A.
+7. Lifelong mapping: one route (KITTI 00's ground truth cut where it comes back to its start) driven 1, 2 and 4 times
+   in one session, each drive in a fresh process: the map must end the same, not a growing copy of it
+   (benchmarks._lifelong).
 
-    python benchmarks/sessions.py [--quick] [--json FILE] [--seed 1] [--kills 20] [--repeats 3]
-                                  [--parts 1 2 3 4 5 6] [--keep DIR]
+    python -m benchmarks.sessions [--quick] [--out FILE] [--seed 1] [--kills 20] [--repeats 3]
+                                  [--parts 1 2 3 4 5 6 7] [--keep DIR]
 
-`--quick`: B of part 1 only to frame 1599, 08 to frame 399, 5 kills, one cost run each.
+`--quick`: B of part 1 only to frame 1599, 08 to frame 399, 5 kills, one cost run each, the lifelong drives on the
+built-in block route.
 """
 
 from __future__ import annotations
 
+import argparse
 import csv
 import json
 import os
@@ -60,23 +65,24 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from neoslam.config import NeoSLAMConfig, SimulatorConfig, load_config  # noqa: E402
-from neoslam.datasets.kitti import read_kitti_sequence  # noqa: E402
-from neoslam.datasets.kitti_writer import write_kitti_sequence  # noqa: E402
-from neoslam.datasets.replay import ReplayedSequence  # noqa: E402
-from neoslam.datasets.simulated import read_dataset  # noqa: E402
-from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error, align, associate  # noqa: E402
-from neoslam.geometry import SimilarityTransform, invert_pose, yaw_pitch_roll  # noqa: E402
-from neoslam.io.trajectory_files import read_trajectory, read_tum  # noqa: E402
-from neoslam.jobs import simulate_dataset, simulation_config  # noqa: E402
-from neoslam.pipeline import run  # noqa: E402
-from neoslam.sim.sessions import session_recordings  # noqa: E402
-from neoslam.store.map_file import MapFile  # noqa: E402
-from neoslam.store.session import MapRecorder  # noqa: E402
-from neoslam.types import Trajectory  # noqa: E402
-from real_streets import THIRD_PASS  # noqa: E402
+from benchmarks import _lifelong, harness
+from benchmarks.harness import data_root
+from benchmarks.real_streets import THIRD_PASS
+from neoslam.config import NeoSLAMConfig, SimulatorConfig, load_config
+from neoslam.datasets.kitti import read_kitti_sequence
+from neoslam.datasets.kitti_writer import write_kitti_sequence
+from neoslam.datasets.replay import ReplayedSequence
+from neoslam.datasets.simulated import read_dataset
+from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error, align, associate
+from neoslam.geometry import SimilarityTransform, invert_pose, yaw_pitch_roll
+from neoslam.io.trajectory_files import read_trajectory, read_tum
+from neoslam.commands.simulate import simulate_dataset
+from neoslam.config.profiles import simulation_config
+from neoslam.pipeline import run
+from neoslam.sim.session_drives import session_recordings
+from neoslam.store.map_file import MapFile
+from neoslam.store.recording import MapRecorder
+from neoslam.types import Trajectory
 
 MAX_ATTEMPTS_PER_KILL = 3  # runs started per kill wanted, at most (a run may end before its moment)
 SPLIT = 1200  # session A of KITTI 05 is frames 0 .. SPLIT-1, B the rest
@@ -93,12 +99,17 @@ STARTUP_FRAMES = 30  # part 5: the short run whose start-up is timed
 RUN_TIMEOUT_S = 1800.0
 
 
-def _arguments(parser) -> None:
+QUICK = "B of part 1 only to frame 1599, 08 to frame 399, 5 kills, one cost run each; part 7 on the block route"
+PARTS = [1, 2, 3, 4, 5, 6, 7]
+
+
+def arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=1, help="world seed; the sessions' noise seeds follow from it")
     parser.add_argument("--kills", type=int, default=None, help=f"crash runs (default {KILLS}; --quick 5)")
     parser.add_argument("--repeats", type=int, default=None, help=f"cost runs of each kind (default {REPEATS})")
-    parser.add_argument("--parts", nargs="+", type=int, default=[1, 2, 3, 4, 5, 6], choices=[1, 2, 3, 4, 5, 6])
+    parser.add_argument("--parts", nargs="+", type=int, default=PARTS, choices=PARTS)
     parser.add_argument("--keep", type=Path, help="work in this folder and keep it (datasets, results, maps)")
+    _lifelong.arguments(parser.add_argument_group("part 7, lifelong"))
 
 
 # --- running neoslam ---------------------------------------------------------------------------------------------
@@ -772,12 +783,6 @@ def part_cost(setup: Setup, repeats: int) -> dict[str, Any]:
 # --- output ------------------------------------------------------------------------------------------------------
 
 
-def _table(title: str, part: dict[str, Any]) -> str:
-    targets = part.get("targets", {})
-    rows = [{"quantity": k, "value": v, "target": targets.get(k, "")} for k, v in part["values"].items()]
-    return f"## {title}\n\n" + markdown_table(rows, ["quantity", "value", "target"])
-
-
 TITLES = {
     1: "1. KITTI 05 in two sessions (A 0-1199 makes the map, B from 1200 extends it)",
     2: "2. Routes that never meet (KITTI 08 into A's map)",
@@ -785,11 +790,14 @@ TITLES = {
     4: "4. Crash: SIGKILL at random moments",
     5: "5. Cost of the map file",
     6: "6. A session that starts in the middle of the map (KITTI 05 frames 500-799 into A's map)",
+    7: "7. Lifelong mapping: one route driven again and again",
 }
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], _arguments)
+def main(argv: list[str] | None = None) -> None:
+    data = (("kitti", "poses"), ("kitti_06_51",), ("models", "yolox_nano_coco"))  # part 3 runs the real front end
+    bench = harness.start(__name__, __doc__, QUICK, arguments, argv, data=data)
+    args = bench.args
     kills = args.kills if args.kills is not None else (5 if args.quick else KILLS)
     repeats = args.repeats if args.repeats is not None else (1 if args.quick else REPEATS)
     config = load_config()
@@ -809,6 +817,12 @@ def main() -> None:
         results: dict[str, Any] = {}
         for number in sorted(args.parts):
             started = time.perf_counter()
+            if number == 7:  # a study of its own within one session: its tables, not a table of values
+                print(f"## {TITLES[number]}\n", flush=True)
+                results["7"] = _lifelong.run_part(bench, args) | {
+                    "benchmark part s": round(time.perf_counter() - started, 1)
+                }
+                continue
             try:
                 part = parts[number]()
             except Exception as error:  # noqa: BLE001 - a failed part is reported and the others run
@@ -816,13 +830,15 @@ def main() -> None:
                 results[str(number)] = {"failed": str(error)}
                 continue
             part["values"]["benchmark part s"] = round(time.perf_counter() - started, 1)
-            print(_table(TITLES[number], part) + "\n", flush=True)
+            targets = part.get("targets", {})
+            rows = [{"quantity": k, "value": v, "target": targets.get(k, "")} for k, v in part["values"].items()]
+            bench.table(f"part{number}", rows, ["quantity", "value", "target"], title=f"## {TITLES[number]}")
             if "rows" in part:
                 columns = ["kill", "kill at s", "killed", "opens", "integrity", "keyframes", "prefix", "complete",
                            "session frames", "results folder"]  # fmt: skip
-                print(markdown_table(part["rows"], columns) + "\n", flush=True)
+                bench.table(f"part{number}_runs", part["rows"], columns)
             results[str(number)] = part
-    write_json(args.json, {"seed": args.seed, "parts": json.loads(json.dumps(results, default=str))})
+    bench.finish({"seed": args.seed, "parts": json.loads(json.dumps(results, default=str))})
 
 
 if __name__ == "__main__":

@@ -8,28 +8,28 @@ frames 0-50 are used. Rows: placed detections per frame and by distance band (de
 objects in the object map (objects.csv), keyframes and objects per keyframe. A row is flagged (!) when the `real`
 profile's mean over the seeds is not within 30 % of the real front end.
 
-    python benchmarks/sim2real.py [--quick] [--json FILE] [--seeds 1 2 ...]  (default seeds 1-10)
+    python -m benchmarks.sim2real [--quick] [--out FILE] [--seeds 1 2 ...]  (default seeds 1-10)
 """
 
 from __future__ import annotations
 
-import sys
+import argparse
 import tempfile
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from _street import DISTANCE_BANDS, band_counts, band_name, run_real_front_end  # noqa: E402
-from neoslam.config import NeoSLAMConfig  # noqa: E402
-from neoslam.datasets.simulated import read_dataset, write_dataset  # noqa: E402
-from neoslam.io.trajectory_files import read_trajectory  # noqa: E402
-from neoslam.jobs import simulation_config  # noqa: E402
-from neoslam.pipeline import run  # noqa: E402
-from neoslam.sim.simulator import simulate  # noqa: E402
-from neoslam.types import Frame, Trajectory  # noqa: E402
+from benchmarks import harness
+from benchmarks._street import DISTANCE_BANDS, band_counts, band_name, run_real_front_end
+from benchmarks.harness import data_root
+from neoslam.config import NeoSLAMConfig
+from neoslam.datasets.simulated import read_dataset, write_dataset
+from neoslam.io.trajectory_files import read_trajectory
+from neoslam.config.profiles import simulation_config
+from neoslam.pipeline import run
+from neoslam.sim.simulator import simulate
+from neoslam.types import Frame, Trajectory
 
 SEEDS, QUICK_SEEDS = list(range(1, 11)), [1, 2]
 PROFILES = ("real", "ideal")
@@ -37,7 +37,10 @@ ODOMETRY = "vo"
 TOLERANCE = 0.3  # the calibrated profile should be within 30 % of the real front end
 
 
-def _arguments(parser) -> None:
+QUICK = f"seeds {QUICK_SEEDS}"
+
+
+def arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds", nargs="+", type=int, default=None)
 
 
@@ -90,8 +93,11 @@ def _ratio(simulated: float, real: float) -> float | None:
     return simulated / real if real > 0 else None
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], _arguments)
+def main(argv: list[str] | None = None) -> None:
+    bench = harness.start(
+        __name__, __doc__, QUICK, arguments, argv, data=(("kitti_06_51",), ("models", "yolox_nano_coco"))
+    )
+    args = bench.args
     seeds = args.seeds or (QUICK_SEEDS if args.quick else SEEDS)
     config = NeoSLAMConfig()
     real_run = run_real_front_end(data_root() / "kitti_06_51", config)
@@ -120,11 +126,10 @@ def main() -> None:
         )
     boxes = float(np.mean(real_run.boxes_per_frame)) if real_run.boxes_per_frame else None
     print(f"KITTI 06 frames 0-{frames - 1}; simulated: seeds {seeds}, odometry {ODOMETRY}; ! = not within 30 %")
-    print(markdown_table(rows, ["measure", "real", "sim real", "ratio", "sim ideal"]))
+    bench.table("counts", rows, ["measure", "real", "sim real", "ratio", "sim ideal"])
     if boxes is not None:
         print(f"\nreal detector boxes per frame (before the stereo step places them): {boxes:.2f}")
-    write_json(
-        args.json,
+    bench.finish(
         {
             "frames": frames,
             "seeds": seeds,

@@ -9,7 +9,7 @@ traffic light, stop sign, fire hydrant, parking meter, bench, potted plant) at a
 and 0.3) then go through the front end's ORB stereo step together, as a front end configured with those classes
 would place them (a box hidden by a nearer one, cut by the image border, with too few agreeing keypoints or beyond
 60 m is not placed). Placed observations go to the world with the ground-truth poses (a benchmark may use them; the
-SLAM path never does) and are grouped as benchmarks/_street.py groups them: one label, within 2.5 m (or 3 depth
+SLAM path never does) and are grouped as benchmarks._street groups them: one label, within 2.5 m (or 3 depth
 std) across frames. A stable object is one placed in at least 3 frames within 2.5 m of its fused position.
 
 Per class: boxes (at 0.25, 0.3 and the threshold) and their score percentiles; placed observations, their share of
@@ -18,28 +18,27 @@ than car, where they stand (along the driven path and to its side; the labels ar
 frames tells whether the class is right), and a recommended class list (classes with a stable object) and class mix
 (each class's share of the stable objects) for the simulator's WorldConfig.class_mix, beside the `real` profile's.
 
-    python benchmarks/street_classes.py [--quick] [--json FILE] [--yolo11] [--scores 0.45 0.3]
+    python -m benchmarks.street_classes [--quick] [--out FILE] [--yolo11] [--scores 0.45 0.3]
 """
 
 from __future__ import annotations
 
-import sys
+import argparse
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from _street import ASSOCIATION_RADIUS, SEQUENCE, Cluster, RealRun, along_and_lateral, cluster_observations  # noqa: E402
-from neoslam.config import NeoSLAMConfig  # noqa: E402
-from neoslam.datasets.kitti import KittiSequence, read_kitti_sequence  # noqa: E402
-from neoslam.perception.config import DetectorConfig  # noqa: E402
-from neoslam.perception.detection import Detection  # noqa: E402
-from neoslam.perception.detector import WindowedDetector, make_detector  # noqa: E402
-from neoslam.perception.stereo import ObjectTriangulator  # noqa: E402
-from neoslam.sim.profiles import DETECTION_PROFILES  # noqa: E402
-from neoslam.types import Frame  # noqa: E402
+from benchmarks import harness
+from benchmarks._street import ASSOCIATION_RADIUS, SEQUENCE, Cluster, RealRun, along_and_lateral, cluster_observations
+from benchmarks.harness import data_root
+from neoslam.config import NeoSLAMConfig
+from neoslam.datasets.kitti import KittiSequence, read_kitti_sequence
+from neoslam.config.perception import DetectorConfig
+from neoslam.perception.detection import Detection
+from neoslam.perception.detector import WindowedDetector, make_detector
+from neoslam.perception.stereo import ObjectTriangulator
+from neoslam.config.calibration import DETECTION_PROFILES
+from neoslam.types import Frame
 
 # COCO street classes and the spellings the models' names files use for them.
 STREET_CLASSES: dict[str, tuple[str, ...]] = {
@@ -196,15 +195,21 @@ def class_mix(clusters: list[Cluster]) -> dict[str, float]:
     return {label: round(stable.count(label) / len(stable), 3) for label in STREET_CLASSES if label in stable}
 
 
-def _arguments(parser) -> None:
+QUICK = "the default score threshold only"
+
+
+def arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--yolo11", action="store_true", help="also YOLO11n (AGPL-3.0 weights from the shared data)")
     parser.add_argument(
         "--scores", nargs="+", type=float, default=None, help="placement score thresholds (default: 0.45 and 0.3)"
     )
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], _arguments)
+def main(argv: list[str] | None = None) -> None:
+    bench = harness.start(
+        __name__, __doc__, QUICK, arguments, argv, data=(("kitti_06_51",), ("models", "yolox_nano_coco"))
+    )
+    args = bench.args
     config = NeoSLAMConfig()
     default_score = config.perception.detector.score_threshold
     scores = args.scores or ([default_score] if args.quick else [default_score, 0.3])
@@ -221,7 +226,7 @@ def main() -> None:
         detections = detect_all(sequence, detector_config, name)
         scored = score_rows(detections, default_score)
         print(f"\n{name}, {len(sequence)} frames of kitti_06_51: boxes of every class down to score {LOW_SCORE:g}")
-        print(markdown_table(scored, list(scored[0])))
+        bench.table(f"scores {source}", scored, list(scored[0]))
         for score in scores:
             frames = place(sequence, detections, score, config)
             run = RealRun(frames, [], sequence.ground_truth, sequence.camera)
@@ -232,10 +237,10 @@ def main() -> None:
             print(
                 f"\n{name}: street-class boxes at score >= {score:g} through the ORB stereo step (classes with a box)"
             )
-            print(markdown_table(rows, list(rows[0])))
+            bench.table(f"classes {source} {score:g}", rows, list(rows[0]))
             if stable:
                 print(f"\nstable objects other than cars ({name}, score >= {score:g}):")
-                print(markdown_table(stable, list(stable[0])))
+                bench.table(f"stable {source} {score:g}", stable, list(stable[0]))
             stable_count = sum(is_stable(c) for c in clusters)
             bound = min(1.0, 3.0 / stable_count) if stable_count else 1.0
             print(
@@ -261,7 +266,7 @@ def main() -> None:
         f"WorldConfig.class_mix {chosen['mix']} (shares of the {chosen['stable_objects']} stable objects); "
         f"the `real` profile's class_mix (the street's hand-labelled objects): {shares}"
     )
-    write_json(args.json, {"frames": len(sequence), "low_score": LOW_SCORE, "results": results, "profile_mix": shares})
+    bench.finish({"frames": len(sequence), "low_score": LOW_SCORE, "results": results, "profile_mix": shares})
 
 
 if __name__ == "__main__":

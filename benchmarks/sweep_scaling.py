@@ -1,8 +1,8 @@
 """Sweeps on this machine: wall time of one spec run serially (one worker process) against the local pool (one
 worker per core), and the per-cell overhead of Ray tasks (a local Ray instance with as many CPUs) against the pool.
 
-    python benchmarks/sweep_scaling.py [--quick] [--full [--sequences 07 ...] [--seeds 1 ...]] [--workers N]
-                                       [--no-ray] [--json FILE]
+    python -m benchmarks.sweep_scaling [--quick] [--full [--sequences 07 ...] [--seeds 1 ...]] [--workers N]
+                                       [--no-ray] [--out FILE]
 
 Default spec: the block route cut to 400 poses, noise vo and heavy, seeds 1-4 (8 cells). `--quick`: 200 poses,
 seeds 1-2 (4 cells). `--full`: the 12 drives of `benchmarks/specs/kitti_sim.yaml` (72 runs: six settings on each
@@ -14,21 +14,23 @@ is printed: on a shared machine the ratio says as much about the other jobs as a
 
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from _sweep import SPECS, with_changes  # noqa: E402
-from neoslam.sweep import LocalPool, RayCluster, expand, load_spec, parse_spec, run_sweep  # noqa: E402
+from benchmarks import harness
+from benchmarks._sweep import SPECS, with_changes
+from benchmarks.harness import data_root
+from neoslam.sweep import LocalPool, RayCluster, expand, load_spec, parse_spec, run_sweep
+
+QUICK = "the block route cut to 200 poses, seeds 1-2 (4 cells)"
 
 
-def _options(parser) -> None:
+def arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--full", action="store_true", help="the kitti_sim spec (long)")
-    parser.add_argument("--workers", type=int, default=os.cpu_count(), help="pool workers (default: one per core)")
     parser.add_argument("--no-ray", action="store_true", help="skip the Ray measurement")
     parser.add_argument("--sequences", nargs="+", help="with --full: only these KITTI sequences")
     parser.add_argument("--seeds", nargs="+", type=int, help="with --full: only these seeds")
@@ -56,8 +58,9 @@ def _timed(spec, executor, folder: Path) -> tuple[float, bytes, int]:
     return wall, (folder / "sweep.csv").read_bytes(), len(result.failed)
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], _options)
+def main(argv: list[str] | None = None) -> None:
+    bench = harness.start(__name__, __doc__, QUICK, arguments, argv, data=())
+    args = bench.args
     spec = _spec(args)
     load_before = os.getloadavg()
     rows, tables = [], {}
@@ -93,7 +96,7 @@ def main() -> None:
     columns = ["run", "executor", "workers", "cells", "failed", "wall_s", "s_per_cell", "speed_up_vs_serial"]
     print(f"## Sweep {spec.name}: {cells} cells, serial against the pool" + (" and Ray" if "ray" in tables else ""))
     print()
-    print(markdown_table(rows, columns))
+    bench.table("executors", rows, columns)
     load_after = os.getloadavg()
     print(f"\nLoad average (1, 5, 15 min) before {load_before[0]:.1f} {load_before[1]:.1f} {load_before[2]:.1f}, "
           f"after {load_after[0]:.1f} {load_after[1]:.1f} {load_after[2]:.1f}; {os.cpu_count()} cores.")  # fmt: skip
@@ -105,8 +108,7 @@ def main() -> None:
         print(f"Ray: {ray_init_s:.1f} s to start the local instance (not counted), then {ray_wall:.1f} s against the "
               f"pool's {pool:.1f} s: {overhead:+.2f} s per cell.")  # fmt: skip
     print(f"Tables the same bytes on every executor: {'yes' if same else 'NO'}.")
-    write_json(
-        args.json,
+    bench.finish(
         {"rows": rows, "ray_init_s": ray_init_s, "ray_overhead_s_per_cell": overhead, "same_tables": same,
          "load_before": load_before, "load_after": load_after},
     )  # fmt: skip

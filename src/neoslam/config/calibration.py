@@ -6,7 +6,7 @@ A detection profile is what the detector and stereo step report, and the street 
 detector that finds most of them out to 40 m. `real` is calibrated to NeoSLAM's real front end (YOLOX-Nano plus ORB
 stereo) on the 51 real frames of KITTI 06 (`kitti_06_51`), with ground-truth poses:
 
-    python benchmarks/calibrate_sim.py          # prints the values below; benchmarks/sim2real.py checks them
+    python -m benchmarks.calibrate_sim          # prints the values below; benchmarks.sim2real checks them
 
 The real front end places few objects: distant and off-axis cars are missed, cars cut by the image border are not
 placed, parked cars hide each other. The `real` values are the fit of that command (the figures it printed are in
@@ -45,7 +45,7 @@ class DetectionProfile:
     world: WorldConfig
 
 
-# Fitted by `python benchmarks/calibrate_sim.py` on kitti_06_51 with the hand labels of tests/data/labels (street and
+# Fitted by `python -m benchmarks.calibrate_sim` on kitti_06_51 with the hand labels of tests/data/labels (street and
 # detection probability from the labels: 20 labelled objects along the street, 65 labelled object-frames in range;
 # the front end placed 1.88 objects a frame, out to 60 m, from 3.78 detector boxes a frame).
 _REAL_DETECTION = DetectionNoiseConfig(
@@ -57,7 +57,7 @@ _REAL_DETECTION = DetectionNoiseConfig(
     false_positives_per_frame=0.078,
     false_positive_depth=(14.8, 54.8),
     disparity_sigma=0.23,
-    # the appearance patches: fitted by `python benchmarks/appearance.py` to the real front end's patch RMSE of the
+    # the appearance patches: fitted by `python -m benchmarks.appearance` to the real front end's patch RMSE of the
     # same car across frames and of different cars (kitti_06_51: medians 30.8 and 49.8 grey levels; simulated
     # 28.3 and 54.8 with these; 17.0 and 61.5 with the world default gain and individuality, 0.08 and 0.5)
     patch_gain_sigma=0.2,
@@ -72,7 +72,7 @@ _REAL_WORLD = WorldConfig(
 
 DETECTION_PROFILES: dict[str, DetectionProfile] = {
     "real": DetectionProfile(
-        "calibrated to the real front end on KITTI 06 (benchmarks/calibrate_sim.py)", _REAL_DETECTION, _REAL_WORLD
+        "calibrated to the real front end on KITTI 06 (benchmarks.calibrate_sim)", _REAL_DETECTION, _REAL_WORLD
     ),
     "ideal": DetectionProfile(
         "the simulator's defaults: a rich street and a detector that finds most objects to 40 m",

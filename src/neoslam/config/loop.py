@@ -27,7 +27,7 @@ class KeyframeConfig(Section):
         gt=0,
         le=1000,
         description="where fewer objects stand within neighbourhood_radius (a sparse street), the neighbourhood "
-        "grows until it holds this many (5: chosen over 6, 8 and no growth with benchmarks/loops.py)",
+        "grows until it holds this many (5: chosen over 6, 8 and no growth with benchmarks.loops)",
     )
     sparse_neighbourhood_radius: float = Field(
         60.0, gt=0, le=1000, description="the largest the neighbourhood grows to on a sparse street, m"

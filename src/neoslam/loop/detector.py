@@ -245,6 +245,20 @@ class LoopClosureDetector:
             and np.degrees(yaw_difference) <= self.config.consistent_yaw_deg
         )
 
+    # The steps of a query, one by one, for diagnostics (benchmarks sort the revisits a query missed by the first
+    # step that loses them); the query itself calls the private ones.
+    def query_window(self, keyframe: Keyframe) -> Keyframe:
+        """The keyframe merged with the keyframes queried just before it, as a query matches it."""
+        return self._query_window(keyframe)
+
+    def ordered_candidates(self, keyframe: Keyframe, eligible: np.ndarray) -> Iterator[tuple[int, np.ndarray | None]]:
+        """Retrieval candidates among the `eligible` stored keyframes (slots), best first, as a query tries them."""
+        return self._ordered_candidates(keyframe, eligible)
+
+    def place(self, keyframe_id: int, odometer_m: float) -> Place:
+        """The stored place of a keyframe as a query at this odometer matches it."""
+        return self._place(keyframe_id, odometer_m)
+
     def query(self, keyframe: Keyframe, odometer_m: float) -> list[LoopClosure]:
         """Closures accepted with this keyframe: its own, and those of the preceding keyframes it confirms."""
         current = self.relocalise(keyframe, odometer_m)

@@ -13,6 +13,7 @@ known to be static is provisional in the keyframe (see loop.matching).
 from __future__ import annotations
 
 from array import array
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,7 +22,14 @@ from neoslam.config import KeyframeConfig
 from neoslam.geometry import camera_points_to_robot
 from neoslam.types import Keyframe, ObjectObservation
 
-__all__ = ["LocalObjectWindow", "KeyframeBuilder", "footprint_radii", "object_centres", "view_covariances"]
+__all__ = [
+    "LocalObjectWindow",
+    "KeyframeBuilder",
+    "KeyframeStep",
+    "footprint_radii",
+    "object_centres",
+    "view_covariances",
+]
 
 # The latest views the window can give back (retract): a moving object is found within a track's views (a few
 # dozen), and this bounds the record when the robot stands and the window forgets nothing.
@@ -212,6 +220,18 @@ class LocalObjectWindow:
         return [o for o in self.objects if o.observations >= self.config.min_observations]
 
 
+@dataclass(frozen=True)
+class KeyframeStep:
+    """One frame through the keyframe builder: the observations it took, the window object each joined, the keyframe
+    made (None when none was due or the window held too few objects) and the odometer after the frame."""
+
+    frame_index: int
+    observations: tuple[ObjectObservation, ...]
+    joined: list[_WindowObject]
+    keyframe: Keyframe | None
+    odometer_m: float
+
+
 class KeyframeBuilder:
     """Makes a keyframe every `spacing` metres of travel from the local window."""
 
@@ -226,16 +246,21 @@ class KeyframeBuilder:
         self.first_id = first_id  # ids continue those of a stored map
         self._next_id = first_id
         self.frames = array("l")  # the frame of every keyframe made (id - first_id is the position here)
+        # Called after every frame with what it did (KeyframeStep): lets a benchmark or a tool follow the keyframes
+        # without changing them; the pipeline itself adds none.
+        self.observers: list[Callable[[KeyframeStep], None]] = []
 
     def add(self, frame_index: int, pose: np.ndarray, observations, travelled_m: float) -> Keyframe | None:
         """Feed one frame (pose estimate and observations); returns a new keyframe when one is due."""
         self.odometer_m += travelled_m
-        self.window.add(pose, observations, self.odometer_m)
-        if self.odometer_m < self._next_keyframe_m:
-            return None
-        keyframe = self._make(frame_index, pose)
-        if keyframe is not None:
-            self._next_keyframe_m = self.odometer_m + self.config.spacing
+        joined = self.window.add(pose, observations, self.odometer_m)
+        keyframe = None
+        if self.odometer_m >= self._next_keyframe_m:
+            keyframe = self._make(frame_index, pose)
+            if keyframe is not None:
+                self._next_keyframe_m = self.odometer_m + self.config.spacing
+        for observer in self.observers:
+            observer(KeyframeStep(frame_index, tuple(observations), joined, keyframe, self.odometer_m))
         return keyframe
 
     def _make(self, frame_index: int, pose: np.ndarray) -> Keyframe | None:

@@ -170,7 +170,7 @@ def equalise_contrast(bgr: np.ndarray, clip: float, tiles: int) -> np.ndarray:
     """Contrast-limited adaptive histogram equalisation of the lightness (CLAHE); the image as it is for clip 0.
 
     KITTI's grey frames are dark where parked cars stand in the shade of trees and hedges; equalised locally, the
-    cars there stand out (measured on the labelled frames: `benchmarks/perception.py`)."""
+    cars there stand out (measured on the labelled frames: `benchmarks.real_streets --parts detection speed`)."""
     if clip <= 0:
         return bgr
     clahe = cv2.createCLAHE(clipLimit=clip, tileGridSize=(tiles, tiles))

@@ -1,39 +1,39 @@
-"""The perception front end on real KITTI frames: detection recall against hand labels, and speed.
+"""Parts (c) and (d) of the real_streets study: the perception front end on real KITTI frames, detection recall
+against hand labels, and speed.
 
-(a) Detection. Each detector configuration runs over the hand-labelled frames (`tests/data/labels/`: frames 0, 5,
+(c) Detection. Each detector configuration runs over the hand-labelled frames (`tests/data/labels/`: frames 0, 5,
     ..., 50 of kitti_06_51 and the KITTI object pair). Recall of the labelled vehicles (cars and trucks at least
     12 px high, doubtful ones left out; IoU 0.4, class-agnostic among vehicles) by distance band, nearer than 40 m
     and over all; false positives a frame (boxes on no labelled object); median detection ms a frame. YOLO11n
     rows appear only when its model is in the shared data (its weights are AGPL-3.0: an option, never the default).
     The score threshold of the default configuration is swept too.
-(b) Speed. The whole front end (read, detection, stereo, odometry) over kitti_06_51's 51 frames, several passes
+(d) Speed. The whole front end (read, detection, stereo, odometry) over kitti_06_51's 51 frames, several passes
     (the first warms up and is not counted): per-stage medians, total median and 95th percentile, frames a second;
     placed objects a frame; the stereo odometry against the ground truth (distance and heading).
 
-    python benchmarks/perception.py [--quick] [--json FILE]
+    python -m benchmarks.real_streets --parts detection speed [--quick]
 
 The machine should be otherwise idle: speed figures of a loaded 2-core machine are worth little.
 """
 
 from __future__ import annotations
 
-import sys
+import argparse
 import time
-from pathlib import Path
 
 import cv2
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import REPO_ROOT, data_root, markdown_table, parse_args, write_json  # noqa: E402
-from neoslam.config import NeoSLAMConfig  # noqa: E402
-from neoslam.datasets.kitti import read_kitti_sequence  # noqa: E402
-from neoslam.evaluation.detection import detection_stats, match_frame, read_labels  # noqa: E402
-from neoslam.geometry import yaw_of  # noqa: E402
-from neoslam.perception.config import DetectionPass, DetectorConfig  # noqa: E402
-from neoslam.perception.detector import make_detector  # noqa: E402
-from neoslam.perception.frontend import STAGES, open_front_end  # noqa: E402
-from neoslam.types import Trajectory  # noqa: E402
+from benchmarks import harness
+from benchmarks.harness import REPO_ROOT, data_root
+from neoslam.config import NeoSLAMConfig
+from neoslam.datasets.kitti import read_kitti_sequence
+from neoslam.evaluation.detection import detection_stats, match_frame, read_labels
+from neoslam.geometry import yaw_of
+from neoslam.config.perception import DetectionPass, DetectorConfig
+from neoslam.perception.detector import make_detector
+from neoslam.perception.frontend import STAGES, open_front_end
+from neoslam.types import Trajectory
 
 LABELS = REPO_ROOT / "tests" / "data" / "labels"
 MIN_IOU = 0.4
@@ -134,8 +134,8 @@ def _with_detector(base: NeoSLAMConfig, **changes) -> NeoSLAMConfig:
     return base.model_copy(update={"perception": base.perception.model_copy(update={"detector": detector})})
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0])
+def run_detection(bench: harness.Run, args: argparse.Namespace) -> dict:
+    """(c): every detector configuration over the hand-labelled frames."""
     base = NeoSLAMConfig()
     images = _labelled_images()
     have_yolo11 = DetectorConfig(source="yolo11").model_path().is_file()
@@ -158,16 +158,17 @@ def main() -> None:
     ]
     columns = ["detector", "frames", "vehicles", "recall < 40 m", "recall", "FP / frame"]
     columns += [c for c in detector_rows[0] if c.startswith("found ")] + ["ms / frame"]
-    print(markdown_table(detector_rows, columns))
-    print()
+    bench.table("detection", detector_rows, columns)
+    return {"detection": detector_rows}
+
+
+def run_speed(bench: harness.Run, args: argparse.Namespace) -> dict:
+    """(d): the whole front end over kitti_06_51, several passes."""
+    base = NeoSLAMConfig()
     passes = QUICK_PASSES if args.quick else PASSES
     front_ends = {"default": base, "frame x1 only": _with_detector(base, passes=[WHOLE])}
     rows = [_front_end_row(name, config, passes) for name, config in front_ends.items()]
     columns = ["configuration", "frames", *(f"{s}_ms" for s in STAGES), "total_ms_median", "total_ms_p95"]
     columns += ["fps_median", "objects_per_frame", "odometry_distance_error_pct", "odometry_heading_error_deg"]
-    print(markdown_table(rows, columns))
-    write_json(args.json, {"fps_median": rows[0]["fps_median"], "detection": detector_rows, "front_end": rows})
-
-
-if __name__ == "__main__":
-    main()
+    bench.table("front_end", rows, columns)
+    return {"fps_median": rows[0]["fps_median"], "front_end": rows}

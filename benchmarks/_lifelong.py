@@ -1,4 +1,5 @@
-"""Lifelong mapping: one route driven again and again must end with the same map, not a growing copy of it.
+"""Part 7 of the sessions study, lifelong mapping: one route driven again and again must end with the same map, not a
+growing copy of it.
 
 KITTI 00's ground truth is cut where it comes back within 1.2 m of its start and driven 1, 2 and 4 times in a row
 (`neoslam.sim.passes.join_passes`: the joins are continuous, timestamps run on), simulated (`vo` odometry, the
@@ -9,47 +10,46 @@ pass, peak memory (the process's peak RSS; and its growth while NeoSLAM ran, the
 median milliseconds per frame over the drive and per pass, and the accepted closures judged against ground truth
 (true within 5 m horizontally and 100 frames apart). Ground truth is read here for judging only.
 
-    python benchmarks/lifelong.py [--quick] [--json FILE] [--sequence 00 | --route block] [--passes 1 2 4]
-                                  [--seed 1] [--profile vo] [--detector real]
+    python -m benchmarks.sessions --parts 7 [--lifelong-sequence 00 | --lifelong-route block] [--passes 1 2 4]
+                                  [--seed 1]
 
 `--quick`: the built-in block route (ideal detection profile) instead, a few seconds a drive.
 """
 
 from __future__ import annotations
 
+import argparse
 import resource
-import sys
 import tempfile
 import time
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import data_root, markdown_table, parse_args, write_json  # noqa: E402
-from neoslam.config import load_config  # noqa: E402
-from neoslam.datasets.simulated import read_dataset, write_dataset  # noqa: E402
-from neoslam.evaluation.loops import LoopCriteria, judge_closures  # noqa: E402
-from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error  # noqa: E402
-from neoslam.io.trajectory_files import read_trajectory  # noqa: E402
-from neoslam.jobs import simulation_config  # noqa: E402
-from neoslam.pipeline import NeoSLAM  # noqa: E402
-from neoslam.sim.passes import join_passes  # noqa: E402
-from neoslam.sim.routes import ROUTES, drive_route  # noqa: E402
-from neoslam.sim.simulator import simulate  # noqa: E402
-from neoslam.types import Trajectory  # noqa: E402
+from benchmarks import harness
+from benchmarks.harness import data_root
+from neoslam.config import load_config
+from neoslam.datasets.simulated import read_dataset, write_dataset
+from neoslam.evaluation.loops import LoopCriteria, judge_closures
+from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
+from neoslam.io.trajectory_files import read_trajectory
+from neoslam.config.profiles import simulation_config
+from neoslam.pipeline import NeoSLAM
+from neoslam.sim.passes import join_passes
+from neoslam.sim.routes import ROUTES, drive_route
+from neoslam.sim.simulator import simulate
+from neoslam.types import Trajectory
 
 PASSES = [1, 2, 4]
 
 
-def _arguments(parser) -> None:
-    parser.add_argument("--sequence", default="00", help="KITTI sequence whose ground truth is driven (default 00)")
-    parser.add_argument("--route", help="a built-in route instead of a KITTI sequence (block, town)")
-    parser.add_argument("--passes", nargs="+", type=int, default=PASSES, help="pass counts (default 1 2 4)")
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--profile", default="vo", help="odometry noise profile (default vo)")
-    parser.add_argument("--detector", default=None, help="detection profile (default real; --quick: ideal)")
+QUICK = "the built-in block route (ideal detection profile) instead of KITTI 00"
+
+
+def arguments(group: argparse._ArgumentGroup) -> None:
+    group.add_argument("--lifelong-sequence", default="00", help="KITTI sequence driven again and again (default 00)")
+    group.add_argument("--lifelong-route", help="a built-in route instead of a KITTI sequence (block, town)")
+    group.add_argument("--passes", nargs="+", type=int, default=PASSES, help="pass counts (default 1 2 4)")
 
 
 def _config(job: dict):
@@ -139,28 +139,28 @@ def run_drive(job: dict) -> dict:
     }
 
 
-def main() -> None:
-    args = parse_args(__doc__.splitlines()[0], _arguments)
-    route = args.route or ("block" if args.quick else None)
-    detector = args.detector or ("ideal" if args.quick else "real")
-    base = {"route": route, "sequence": args.sequence, "seed": args.seed, "profile": args.profile,
+def run_part(bench: harness.Run, args: argparse.Namespace) -> dict:
+    """The drives of every pass count, each simulated and run in a fresh process; prints the tables."""
+    route = args.lifelong_route or ("block" if args.quick else None)
+    detector = "ideal" if args.quick else "real"
+    profile = "vo"
+    base = {"route": route, "sequence": args.lifelong_sequence, "seed": args.seed, "profile": profile,
             "detector": detector}  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
         jobs = [base | {"passes": p, "folder": str(Path(tmp) / f"x{p}")} for p in args.passes]
-        context = get_context("spawn")  # a fresh process per drive: its peak memory is the drive's own
-        with context.Pool(2, maxtasksperchild=1) as pool:
+        # a fresh process per drive: its peak memory is the drive's own
+        with harness.pool(args.workers) as pool:
             simulated = pool.map(simulate_drive, jobs, chunksize=1)
-        with context.Pool(2, maxtasksperchild=1) as pool:
+        with harness.pool(args.workers) as pool:
             rows = pool.map(run_drive, [j | s for j, s in zip(jobs, simulated, strict=True)], chunksize=1)
-    name = route or f"KITTI {args.sequence}"
-    print(f"## {name} driven {', '.join(map(str, args.passes))} times (simulated, {args.profile} odometry, "
+    name = route or f"KITTI {args.lifelong_sequence}"
+    print(f"## {name} driven {', '.join(map(str, args.passes))} times (simulated, {profile} odometry, "
           f"{detector} detection profile, seed {args.seed})\n")  # fmt: skip
     columns = ["passes", "frames", "ate_odometry_m", "ate_corrected_m", "ate_corrected_last_pass_m", "objects",
                "world_objects", "keyframes", "experiences", "links", "closures_true", "closures_false",
                "peak_rss_mb", "slam_rss_growth_mb", "ms_per_frame_median"]  # fmt: skip
-    print(markdown_table(rows, columns))
+    bench.table("lifelong", rows, columns)
     longest = max(rows, key=lambda r: r["passes"])
-    print(f"\nThe {longest['passes']}-pass drive at the end of each pass:\n")
     by_pass = [
         {"pass": p + 1, **counts, "ms_per_frame_median": ms, "ms_per_frame_p95": p95, "ate_corrected_m": ate}
         for p, (counts, ms, p95, ate) in enumerate(
@@ -170,17 +170,13 @@ def main() -> None:
     ]  # fmt: skip
     pass_columns = ["pass", "objects", "keyframes", "experiences", "links", "hebbian_keyframes", "peak_rss_mb",
                     "ms_per_frame_median", "ms_per_frame_p95", "ate_corrected_m"]  # fmt: skip
-    print(markdown_table(by_pass, pass_columns))
+    title = f"The {longest['passes']}-pass drive at the end of each pass:"
+    bench.table("lifelong_by_pass", by_pass, pass_columns, title=title)
     single = next((r for r in rows if r["passes"] == 1), None)
     if single is not None:
         print(
-            f"\nObjects after {longest['passes']} passes: {longest['objects']} against {single['objects']} after one "
+            f"Objects after {longest['passes']} passes: {longest['objects']} against {single['objects']} after one "
             f"({100.0 * (longest['objects'] / max(single['objects'], 1) - 1):+.1f} %); corrected ATE "
             f"{longest['ate_corrected_m']:.2f} m against {single['ate_corrected_m']:.2f} m."
         )
-    write_json(args.json, {"drive": name, "profile": args.profile, "detector": detector, "seed": args.seed,
-                           "rows": rows})  # fmt: skip
-
-
-if __name__ == "__main__":
-    main()
+    return {"drive": name, "profile": profile, "detector": detector, "seed": args.seed, "rows": rows}
