@@ -29,11 +29,11 @@ import numpy as np
 from benchmarks import harness
 from benchmarks.harness import data_root
 from neoslam.config import load_config
+from neoslam.config.profiles import simulation_config
 from neoslam.datasets.simulated import read_dataset, write_dataset
 from neoslam.evaluation.loops import LoopCriteria, judge_closures
 from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
 from neoslam.io.trajectory_files import read_trajectory
-from neoslam.config.profiles import simulation_config
 from neoslam.pipeline import NeoSLAM
 from neoslam.sim.passes import join_passes
 from neoslam.sim.routes import ROUTES, drive_route

@@ -27,10 +27,10 @@ import numpy as np
 from benchmarks import harness
 from benchmarks.harness import REPO_ROOT, data_root
 from neoslam.config import NeoSLAMConfig
+from neoslam.config.perception import DetectionPass, DetectorConfig
 from neoslam.datasets.kitti import read_kitti_sequence
 from neoslam.evaluation.detection import detection_stats, match_frame, read_labels
 from neoslam.geometry import yaw_of
-from neoslam.config.perception import DetectionPass, DetectorConfig
 from neoslam.perception.detector import make_detector
 from neoslam.perception.frontend import STAGES, open_front_end
 from neoslam.types import Trajectory

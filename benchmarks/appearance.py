@@ -73,9 +73,9 @@ from benchmarks.harness import data_root
 from benchmarks.real_streets import THIRD_PASS
 from benchmarks.sim2real import ODOMETRY, _street_poses
 from neoslam.config import NeoSLAMConfig, SimulatorConfig
+from neoslam.config.profiles import simulation_config
 from neoslam.datasets.kitti import KittiSequence, read_kitti_sequence
 from neoslam.datasets.replay import ReplayedSequence, forward_back_forward
-from neoslam.config.profiles import simulation_config
 from neoslam.perception.frontend import open_front_end
 from neoslam.sim.simulator import simulate
 from neoslam.types import Frame, Trajectory

@@ -20,9 +20,9 @@ import numpy as np
 
 from benchmarks import harness
 from benchmarks.harness import REPO_ROOT, data_root
+from neoslam.config.perception import BagConfig
 from neoslam.datasets.bag import open_bag
 from neoslam.datasets.kitti import read_kitti_sequence
-from neoslam.config.perception import BagConfig
 
 PASSES, QUICK_PASSES = 4, 2
 BAGS = {  # name: (file or folder name, kind, right camera as CompressedImage)

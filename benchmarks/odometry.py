@@ -16,9 +16,9 @@ from pathlib import Path
 
 from benchmarks import harness
 from benchmarks.harness import data_root
-from neoslam.config import NOISE_PROFILES, load_config
-from neoslam.commands.simulate import record, simulate_dataset
 from neoslam.commands.run import run_dataset
+from neoslam.commands.simulate import record, simulate_dataset
+from neoslam.config import NOISE_PROFILES, load_config
 from neoslam.config.profiles import simulation_config
 
 QUICK = "seed 1 only"

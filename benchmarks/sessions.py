@@ -68,7 +68,9 @@ from scipy.spatial import cKDTree
 from benchmarks import _lifelong, harness
 from benchmarks.harness import data_root
 from benchmarks.real_streets import THIRD_PASS
+from neoslam.commands.simulate import simulate_dataset
 from neoslam.config import NeoSLAMConfig, SimulatorConfig, load_config
+from neoslam.config.profiles import simulation_config
 from neoslam.datasets.kitti import read_kitti_sequence
 from neoslam.datasets.kitti_writer import write_kitti_sequence
 from neoslam.datasets.replay import ReplayedSequence
@@ -76,8 +78,6 @@ from neoslam.datasets.simulated import read_dataset
 from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error, align, associate
 from neoslam.geometry import SimilarityTransform, invert_pose, yaw_pitch_roll
 from neoslam.io.trajectory_files import read_trajectory, read_tum
-from neoslam.commands.simulate import simulate_dataset
-from neoslam.config.profiles import simulation_config
 from neoslam.pipeline import run
 from neoslam.sim.session_drives import session_recordings
 from neoslam.store.map_file import MapFile

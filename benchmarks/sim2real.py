@@ -24,9 +24,9 @@ from benchmarks import harness
 from benchmarks._street import DISTANCE_BANDS, band_counts, band_name, run_real_front_end
 from benchmarks.harness import data_root
 from neoslam.config import NeoSLAMConfig
+from neoslam.config.profiles import simulation_config
 from neoslam.datasets.simulated import read_dataset, write_dataset
 from neoslam.io.trajectory_files import read_trajectory
-from neoslam.config.profiles import simulation_config
 from neoslam.pipeline import run
 from neoslam.sim.simulator import simulate
 from neoslam.types import Frame, Trajectory

@@ -32,12 +32,12 @@ from benchmarks import harness
 from benchmarks._street import ASSOCIATION_RADIUS, SEQUENCE, Cluster, RealRun, along_and_lateral, cluster_observations
 from benchmarks.harness import data_root
 from neoslam.config import NeoSLAMConfig
-from neoslam.datasets.kitti import KittiSequence, read_kitti_sequence
+from neoslam.config.calibration import DETECTION_PROFILES
 from neoslam.config.perception import DetectorConfig
+from neoslam.datasets.kitti import KittiSequence, read_kitti_sequence
 from neoslam.perception.detection import Detection
 from neoslam.perception.detector import WindowedDetector, make_detector
 from neoslam.perception.stereo import ObjectTriangulator
-from neoslam.config.calibration import DETECTION_PROFILES
 from neoslam.types import Frame
 
 # COCO street classes and the spellings the models' names files use for them.

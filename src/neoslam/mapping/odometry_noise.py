@@ -18,9 +18,10 @@ in `bins` groups of equal count by a^2,
         = (a^2 s_h + s_d) * (dt_long - dt_short)
 is fitted for s_h >= 0 and s_d >= 0 by weighted least squares (medians: views of a car not yet found moving are a
 minority). Sparse streets give an object or two a frame, so each view is a sample of its own, not a frame's joint
-fit. Measured on simulated KITTI 05 and 00 (benchmarks.kitti_sim --parts moving; drawn: `heavy` 0.032 rad and 0.32 m per root
-second, `vo` 0.0032 and 0.063): 0.024-0.028 and 0.063-0.57 under `heavy`, 0.003-0.004 and at most 0.063 under `vo`,
-static or with 20 % of the objects moving (the position term is reported as the larger of the estimate and the floor).
+fit. Measured on simulated KITTI 05 and 00 (`python -m benchmarks.kitti_sim --parts moving`; drawn: `heavy` 0.032 rad
+and 0.32 m per root second, `vo` 0.0032 and 0.063): 0.024-0.028 and 0.063-0.57 under `heavy`, 0.003-0.004 and at most
+0.063 under `vo`, static or with 20 % of the objects moving (the position term is reported as the larger of the
+estimate and the floor).
 """
 
 from __future__ import annotations
