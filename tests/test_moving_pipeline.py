@@ -95,7 +95,7 @@ def test_objects_csv_has_the_moving_column(runs: dict[bool, RunResult], tmp_path
     write_objects(tmp_path / "objects.csv", on.objects, on.moving_objects)
     rows = read_table(tmp_path / "objects.csv", OBJECT_COLUMNS)
     assert OBJECT_COLUMNS[-1] == "moving"
-    assert [row[-1] for row in rows] == ["0"] * len(on.objects) + ["1"] * len(on.moving_objects)
+    assert [row[-1] for row in rows.rows] == ["0"] * len(on.objects) + ["1"] * len(on.moving_objects)
 
 
 def test_same_street_same_result(runs: dict[bool, RunResult]) -> None:

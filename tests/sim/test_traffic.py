@@ -195,7 +195,7 @@ def test_dataset_with_traffic_reads_back(tmp_path: Path) -> None:
     dataset = read_dataset(tmp_path / "busy")
     assert sum(len(o) for o in dataset.observations) == sum(len(d) for d in recording.detections)
     rows = read_table(tmp_path / "busy" / "truth" / "objects.csv", OBJECT_COLUMNS)
-    speeds = np.array([np.linalg.norm([float(v) for v in row[-3:]]) for row in rows])
+    speeds = np.array([np.linalg.norm([float(v) for v in row[-3:]]) for row in rows.rows])
     moving = np.flatnonzero(speeds > 0)
     np.testing.assert_array_equal(moving, np.sort(recording.world.traffic.ids))
     seen = {d.object_id for frame in recording.detections for d in frame}
