@@ -1,5 +1,4 @@
-"""Parts (c) and (d) of the real_streets study: the perception front end on real KITTI frames, detection recall
-against hand labels, and speed.
+"""Part (c) of the real_streets study: the detector on real KITTI frames, its recall against hand labels.
 
 (c) Detection. Each detector configuration runs over the hand-labelled frames (`tests/data/labels/`: frames 0, 5,
     ..., 50 of kitti_06_51 and the KITTI object pair). Recall of the labelled vehicles (cars and trucks at least
@@ -7,13 +6,11 @@ against hand labels, and speed.
     and over all; false positives a frame (boxes on no labelled object); median detection ms a frame. YOLO11n
     rows appear only when its model is in the shared data (its weights are AGPL-3.0: an option, never the default).
     The score threshold of the default configuration is swept too.
-(d) Speed. The whole front end (read, detection, stereo, odometry) over kitti_06_51's 51 frames, several passes
-    (the first warms up and is not counted): per-stage medians, total median and 95th percentile, frames a second;
-    placed objects a frame; the stereo odometry against the ground truth (distance and heading).
 
-    python -m benchmarks.real_streets --parts detection speed [--quick]
+    python -m benchmarks.real_streets --parts detection
 
-The machine should be otherwise idle: speed figures of a loaded 2-core machine are worth little.
+The detector's speed, its windows' recall against their cost, and the whole front end's speed are
+`benchmarks.frontend_speed`'s.
 """
 
 from __future__ import annotations
@@ -28,16 +25,11 @@ from benchmarks import harness
 from benchmarks.harness import REPO_ROOT, data_root
 from neoslam.config import NeoSLAMConfig
 from neoslam.config.perception import DetectionPass, DetectorConfig
-from neoslam.datasets.kitti import read_kitti_sequence
 from neoslam.evaluation.detection import detection_stats, match_frame, read_labels
-from neoslam.geometry import yaw_of
 from neoslam.perception.detector import make_detector
-from neoslam.perception.frontend import STAGES, open_front_end
-from neoslam.types import Trajectory
 
 LABELS = REPO_ROOT / "tests" / "data" / "labels"
 MIN_IOU = 0.4
-PASSES, QUICK_PASSES = 4, 2  # front-end passes over the 51 frames; the first is a warm-up
 SEQUENCE = "06"
 WHOLE = DetectionPass()
 HALF = DetectionPass(scale=0.5)
@@ -53,8 +45,9 @@ DETECTORS: dict[str, dict] = {
     "YOLOX-Nano, frame x1": {"passes": [WHOLE]},
     "YOLOX-Nano, frame x1.25": {"passes": [DetectionPass(scale=1.25)]},
     "YOLOX-Nano, frame x1 + road band x1.5": {"passes": [WHOLE, BAND]},
-    "YOLOX-Nano, frame x0.5 + road band x1.5, no CLAHE": {"contrast_clip": 0},
-    "YOLOX-Nano, frame x0.5 + road band x1.5 (default)": {},
+    "YOLOX-Nano, frame x0.5 + road band x1.5": {"passes": [HALF, BAND]},
+    "YOLOX-Nano, frame x0.4 + road band x1.25, no CLAHE": {"contrast_clip": 0},
+    "YOLOX-Nano, frame x0.4 + road band x1.25 (default)": {},
     "YOLO11n, frame x1": {"source": "yolo11", "passes": [WHOLE]},
     "YOLO11n, frame x1 + road band x1.5": {"source": "yolo11", "passes": [WHOLE, BAND]},
     "YOLO11n, frame x1 + road band x1.5, score 0.35": {
@@ -62,7 +55,8 @@ DETECTORS: dict[str, dict] = {
         "passes": [WHOLE, BAND],
         "score_threshold": 0.35,
     },
-    "YOLO11n, frame x0.5 + road band x1.5": {"source": "yolo11"},
+    "YOLO11n, frame x0.5 + road band x1.5": {"source": "yolo11", "passes": [HALF, BAND]},
+    "YOLO11n, frame x0.4 + road band x1.25": {"source": "yolo11"},
 }
 THRESHOLDS = [0.3, 0.35, 0.4, 0.5]  # the default, 0.45, has its row above
 NMS_IOUS = [0.3, 0.6]  # the default, 0.45, likewise
@@ -92,48 +86,6 @@ def _detection_row(name: str, config: DetectorConfig, images: list) -> dict:
     return {"detector": name, **detection_stats(matches).as_row(), "ms / frame": float(np.median(times) * 1e3)}
 
 
-def _odometry_errors(estimate: np.ndarray, truth: Trajectory) -> tuple[float, float]:
-    """Distance travelled (relative error, %) and heading change (error, degrees) over the sequence."""
-    travelled = np.linalg.norm(np.diff(estimate[:, :3, 3], axis=0), axis=1).sum()
-    distance_error = 100.0 * (travelled / truth.path_length() - 1.0)
-    turn = yaw_of(estimate[-1:])[0] - yaw_of(estimate[:1])[0]
-    true_turn = yaw_of(truth.poses[-1:])[0] - yaw_of(truth.poses[:1])[0]
-    return float(distance_error), float(np.degrees(abs(turn - true_turn)))
-
-
-def _front_end_row(name: str, config: NeoSLAMConfig, passes: int) -> dict:
-    sequence = read_kitti_sequence(data_root() / "kitti_06_51", SEQUENCE)
-    stage_times: dict[str, list[float]] = {stage: [] for stage in STAGES}
-    objects: list[int] = []
-    for run in range(passes):
-        dataset = open_front_end(sequence, config.perception)
-        frames = list(dataset.frames())
-        if run == 0:
-            continue  # warm-up: model load, first inferences
-        for stage in STAGES:
-            stage_times[stage] += dataset.front_end.times.stages[stage]
-        objects += [len(f.observations) for f in frames]
-    poses = np.array([f.odometry_pose for f in frames])
-    distance_error, heading_error = _odometry_errors(poses, sequence.ground_truth)
-    total = np.sum([stage_times[s] for s in STAGES], axis=0)
-    row = {"configuration": name, "frames": len(total)}
-    row |= {f"{s}_ms": float(np.median(stage_times[s]) * 1e3) for s in STAGES}
-    row |= {
-        "total_ms_median": float(np.median(total) * 1e3),
-        "total_ms_p95": float(np.percentile(total, 95) * 1e3),
-        "fps_median": float(1.0 / np.median(total)),
-        "objects_per_frame": float(np.mean(objects)),
-        "odometry_distance_error_pct": distance_error,
-        "odometry_heading_error_deg": heading_error,
-    }
-    return row
-
-
-def _with_detector(base: NeoSLAMConfig, **changes) -> NeoSLAMConfig:
-    detector = base.perception.detector.model_copy(update=changes)
-    return base.model_copy(update={"perception": base.perception.model_copy(update={"detector": detector})})
-
-
 def run_detection(bench: harness.Run, args: argparse.Namespace) -> dict:
     """(c): every detector configuration over the hand-labelled frames."""
     base = NeoSLAMConfig()
@@ -160,15 +112,3 @@ def run_detection(bench: harness.Run, args: argparse.Namespace) -> dict:
     columns += [c for c in detector_rows[0] if c.startswith("found ")] + ["ms / frame"]
     bench.table("detection", detector_rows, columns)
     return {"detection": detector_rows}
-
-
-def run_speed(bench: harness.Run, args: argparse.Namespace) -> dict:
-    """(d): the whole front end over kitti_06_51, several passes."""
-    base = NeoSLAMConfig()
-    passes = QUICK_PASSES if args.quick else PASSES
-    front_ends = {"default": base, "frame x1 only": _with_detector(base, passes=[WHOLE])}
-    rows = [_front_end_row(name, config, passes) for name, config in front_ends.items()]
-    columns = ["configuration", "frames", *(f"{s}_ms" for s in STAGES), "total_ms_median", "total_ms_p95"]
-    columns += ["fps_median", "objects_per_frame", "odometry_distance_error_pct", "odometry_heading_error_deg"]
-    bench.table("front_end", rows, columns)
-    return {"fps_median": rows[0]["fps_median"], "front_end": rows}

@@ -1,5 +1,5 @@
-"""The whole system on real KITTI images: keyframes along a real street, a revisit that closes loops, the detector
-against hand labels, and the front end's speed.
+"""The whole system on real KITTI images: keyframes along a real street, a revisit that closes loops, and the
+detector against hand labels.
 
 (a) `kitti_06_51`, the 51 real stereo frames of KITTI 06 (60 m of a residential street) through the real front end
     (default detector, ORB stereo, stereo odometry) and the pipeline: detections and placed objects a frame,
@@ -14,13 +14,12 @@ against hand labels, and the front end's speed.
 (a) and (b) with the default detector and, with --yolo11 (its weights are AGPL-3.0, read from the shared data, never
 part of NeoSLAM), with YOLO11n.
 
-(c) Detection recall against hand labels on real frames, and (d) the front end's speed and odometry:
-benchmarks._perception. The machine should be otherwise idle: speed figures of a loaded 2-core machine are worth
-little (the result's stamp records the load).
+(c) Detection recall against hand labels on real frames: benchmarks._perception. The front end's speed is
+`benchmarks.frontend_speed`'s.
 
-    python -m benchmarks.real_streets [--quick] [--parts street revisit detection speed] [--yolo11] [--out FILE]
+    python -m benchmarks.real_streets [--quick] [--parts street revisit detection] [--yolo11] [--out FILE]
 
-`--quick`: fewer timed passes of the front end in (d); the rest is as small as it is.
+`--quick`: the same run (it is as small as it is).
 """
 
 from __future__ import annotations
@@ -93,8 +92,8 @@ def _revisit_row(name: str, config: NeoSLAMConfig) -> dict:
     }
 
 
-QUICK = f"{_perception.QUICK_PASSES - 1} timed pass of the front end in (d) instead of {_perception.PASSES - 1}"
-PARTS = ["street", "revisit", "detection", "speed"]
+QUICK = "the same run as the default (it is as small as it is)"
+PARTS = ["street", "revisit", "detection"]
 
 
 def arguments(parser: argparse.ArgumentParser) -> None:
@@ -127,9 +126,6 @@ def main(argv: list[str] | None = None) -> None:
     if "detection" in args.parts:
         print("## (c) Detection against hand labels\n")
         figures |= _perception.run_detection(bench, args)
-    if "speed" in args.parts:
-        print("## (d) The front end's speed\n")
-        figures |= _perception.run_speed(bench, args)
     bench.finish(figures)
 
 

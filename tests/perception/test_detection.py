@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from pydantic import ValidationError
@@ -15,6 +16,7 @@ from neoslam.perception.detection import (
     PAD_VALUE,
     Detection,
     Window,
+    equalise_contrast,
     letterbox,
     load_class_names,
     network_size,
@@ -136,6 +138,17 @@ def test_grey_images_become_three_channels_and_others_are_refused() -> None:
         to_bgr(np.zeros((10, 10), dtype=np.float32))
     with pytest.raises(ValueError, match="shape"):
         to_bgr(np.zeros((10, 10, 4), dtype=np.uint8))
+
+
+def test_contrast_is_equalised_on_grey_itself_and_on_a_colour_image_s_lightness() -> None:
+    rng = np.random.default_rng(3)
+    grey = (rng.random((64, 96)) * 60 + 40).astype(np.uint8)  # dull: a narrow band of grey levels
+    equalised = equalise_contrast(grey, 3.0, 4)
+    assert equalised.shape == grey.shape and np.ptp(equalised) > np.ptp(grey)
+    assert np.array_equal(equalised, cv2.createCLAHE(clipLimit=3.0, tileGridSize=(4, 4)).apply(grey))
+    colour = equalise_contrast(to_bgr(grey), 3.0, 4)
+    assert colour.shape == (64, 96, 3) and np.ptp(colour) > np.ptp(grey)
+    assert equalise_contrast(grey, 0.0, 4) is grey
 
 
 def test_class_names_fall_back_to_coco(tmp_path: Path) -> None:

@@ -151,9 +151,19 @@ def test_the_whole_frame_at_its_own_size_finds_more_than_at_416(
     assert _cars(yolox_detector.detect(40, street_frame)) >= _cars(yolox_small_detector.detect(40, street_frame)) + 2
 
 
-def test_grey_image_is_replicated_to_bgr(yolox_detector, street_frame: np.ndarray) -> None:
+def test_grey_image_is_replicated_to_bgr(yolox_model: Path, street_frame: np.ndarray) -> None:
+    plain = make_detector(DetectorConfig(model=yolox_model, contrast_clip=0))
     bgr = cv2.cvtColor(street_frame, cv2.COLOR_GRAY2BGR)
-    assert yolox_detector.detect(0, street_frame) == yolox_detector.detect(0, bgr)
+    assert plain.detect(0, street_frame) == plain.detect(0, bgr)
+
+
+def test_a_grey_image_is_equalised_as_it_is(yolox_model: Path, street_frame: np.ndarray) -> None:
+    # Equalised in grey, then replicated: the same as giving the network the equalised grey image with contrast off.
+    detector = make_detector(DetectorConfig(model=yolox_model))
+    plain = make_detector(DetectorConfig(model=yolox_model, contrast_clip=0))
+    equalised = cv2.createCLAHE(clipLimit=3.0, tileGridSize=(8, 8)).apply(street_frame)
+    assert detector.detect(0, street_frame) == plain.detect(0, equalised)
+    assert detector.detect(0, street_frame) != plain.detect(0, street_frame)
 
 
 def test_detections_are_deterministic(yolox_detector, object_pair_left: np.ndarray) -> None:

@@ -70,12 +70,13 @@ class DetectorConfig(Section):
     passes: list[DetectionPass] = Field(
         default_factory=lambda: [
             DetectionPass(scale=0.5),
-            DetectionPass(rows=(0.32, 0.78), scale=1.5),
+            DetectionPass(rows=(0.32, 0.78), scale=1.25),
         ],
         min_length=1,
         description="windows the network looks at: by default the whole frame at half size (near objects) and the "
-        "band of rows that holds KITTI's road and parked cars enlarged 1.5x (distant ones, which a whole frame "
-        "shrunk to YOLOX-Nano's 416 px input loses)",
+        "band of rows that holds KITTI's road and parked cars enlarged 1.25x (distant ones, which a whole frame "
+        "shrunk to YOLOX-Nano's 416 px input loses): of the sets measured, the cheapest that keeps the recall on the "
+        "labelled frames and the objects mapped on kitti_06_51 (docs/benchmarks/frontend_speed.md)",
     )
     score_threshold: float = Field(
         0.45, ge=0, le=1, description="score (objectness x class) to keep a box (chosen on the labelled frames)"
@@ -124,7 +125,9 @@ class StereoObjectConfig(Section):
     """ORB keypoints in each left box matched along the rectified epipolar line, then triangulated (paper 3.1)."""
 
     orb_features: int = Field(300, gt=0, le=100_000, description="most ORB keypoints detected in one box")
-    orb_scale_factor: float = Field(1.2, gt=1, le=4, description="ORB pyramid scale between levels")
+    orb_scale_factor: float = Field(
+        1.4, gt=1, le=4, description="ORB pyramid scale between levels (1.4: fewer levels than 1.2, the same objects)"
+    )
     orb_fast_threshold: int = Field(12, gt=0, le=255, description="FAST threshold of the ORB detector")
     max_hamming: int = Field(60, gt=0, le=256, description="largest ORB descriptor distance of a stereo match, bits")
     ratio: float = Field(0.9, gt=0, le=1, description="best / second-best descriptor distance, at most")
@@ -189,10 +192,10 @@ class StereoOdometryConfig(Section):
     corner_spacing: float = Field(8.0, gt=0, le=1e4, description="least distance between corners, px")
     corner_block: int = Field(3, gt=0, le=99, description="Shi-Tomasi gradient window side, px")
     klt_window: int = Field(
-        13,
+        9,
         gt=2,
         le=101,
-        description="Lucas-Kanade window side, px (cost grows with its square)",
+        description="Lucas-Kanade window side, px (cost grows with its square; 9 tracks KITTI's frames as well as 13)",
     )
     klt_levels: int = Field(3, ge=0, le=10, description="Lucas-Kanade pyramid levels of the frame-to-frame tracking")
     stereo_levels: int = Field(

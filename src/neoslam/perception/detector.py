@@ -18,7 +18,15 @@ import numpy as np
 
 from neoslam.config.perception import DetectorConfig
 from neoslam.errors import ConfigError
-from neoslam.perception.detection import Detection, Window, equalise_contrast, nms, to_bgr, touches_inner_cut
+from neoslam.perception.detection import (
+    Detection,
+    Window,
+    equalise_contrast,
+    nms,
+    plain_image,
+    to_bgr,
+    touches_inner_cut,
+)
 
 __all__ = ["DetectionModel", "WindowedDetector", "make_detector", "windows_of"]
 
@@ -62,7 +70,7 @@ class WindowedDetector:
 
         `frame_index` is not used by the network; it is part of the `ObjectDetector` interface.
         """
-        bgr = equalise_contrast(to_bgr(image), self.config.contrast_clip, self.config.contrast_tiles)
+        bgr = to_bgr(equalise_contrast(plain_image(image), self.config.contrast_clip, self.config.contrast_tiles))
         size = (bgr.shape[1], bgr.shape[0])
         parts = [self._detect_window(bgr, window, size) for window in windows_of(self.config, size)]
         boxes, scores, class_ids = (np.concatenate(p) for p in zip(*parts, strict=True))

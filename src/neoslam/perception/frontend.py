@@ -35,6 +35,7 @@ __all__ = [
     "PerceptionTimes",
     "StereoPair",
     "DetectedPair",
+    "PlacedPair",
     "StereoFrontEnd",
     "ImageDataset",
     "open_front_end",
@@ -105,6 +106,14 @@ class DetectedPair:
     detections: list[Detection]
 
 
+@dataclass(frozen=True, slots=True)
+class PlacedPair:
+    """A detected stereo pair with its objects placed in 3-D."""
+
+    detected: DetectedPair
+    observations: tuple[ObjectObservation, ...]
+
+
 @dataclass
 class PerceptionTimes:
     """Wall time of each front-end stage, per frame, seconds."""
@@ -145,27 +154,30 @@ class StereoFrontEnd:
 
     def frame(self, index: int, timestamp: float, left: np.ndarray, right: np.ndarray) -> Frame:
         """The frame of one rectified stereo pair (paper 3.1: objects in the camera frame, robot pose, velocities)."""
-        return self.placed(self.detected(StereoPair(index, timestamp, left, right)))
+        return self.moved(self.triangulated(self.detected(StereoPair(index, timestamp, left, right))))
 
     def detected(self, pair: StereoPair) -> DetectedPair:
         """Objects detected in the pair's left image."""
         return DetectedPair(pair, self._timed("detection", self.detector.detect, pair.index, pair.left))
 
-    def placed(self, detected: DetectedPair) -> Frame:
-        """The detected objects placed in 3-D and the robot moved by the pair: the frame (after `detected`)."""
+    def triangulated(self, detected: DetectedPair) -> PlacedPair:
+        """The detected objects placed in 3-D by stereo matching (after `detected`; depends on no other frame)."""
         pair, detections = detected.pair, detected.detections
-        index, timestamp, left, right = pair.index, pair.timestamp, pair.left, pair.right
-        observations: list[ObjectObservation] = self._timed(
-            "stereo", self.triangulator.observe, left, right, detections
-        )
+        observations = self._timed("stereo", self.triangulator.observe, pair.left, pair.right, detections)
+        return PlacedPair(detected, tuple(observations))
+
+    def moved(self, placed: PlacedPair) -> Frame:
+        """The robot moved by the pair, with the objects placed in 3-D: the frame (after `triangulated`; the
+        odometry carries state from frame to frame, so the frames come here in order)."""
+        pair, detections = placed.detected.pair, placed.detected.detections
         boxes = np.array([d.box for d in detections], dtype=np.float64).reshape(-1, 4)
-        pose = self._timed("odometry", self.motion.pose, index, left, right, boxes)
+        pose = self._timed("odometry", self.motion.pose, pair.index, pair.left, pair.right, boxes)
         linear, angular = np.zeros(3), np.zeros(3)
         if self._previous is not None:
-            stamps = np.array([self._previous[0], timestamp])
+            stamps = np.array([self._previous[0], pair.timestamp])
             linear, angular = (v[1] for v in body_velocities(np.stack([self._previous[1], pose]), stamps))
-        self._previous = (timestamp, pose)
-        return Frame(index, timestamp, pose, linear, angular, tuple(observations))
+        self._previous = (pair.timestamp, pose)
+        return Frame(pair.index, pair.timestamp, pose, linear, angular, placed.observations)
 
 
 @dataclass
@@ -199,10 +211,11 @@ class ImageDataset:
         front_end = self.front_end
         if self.pipeline_depth == 0:
             for pair in self._pairs():
-                yield front_end.placed(front_end.detected(pair))
+                yield front_end.moved(front_end.triangulated(front_end.detected(pair)))
             return
-        for detected in staged(self._pairs(), [front_end.detected], self.pipeline_depth):
-            yield front_end.placed(detected)
+        stages = [front_end.detected, front_end.triangulated]
+        for placed in staged(self._pairs(), stages, self.pipeline_depth):
+            yield front_end.moved(placed)
 
 
 def _detections_file(path: Path, config: PerceptionConfig, frames: int) -> DetectionsFile:
