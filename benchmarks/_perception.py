@@ -46,8 +46,8 @@ DETECTORS: dict[str, dict] = {
     "YOLOX-Nano, frame x1.25": {"passes": [DetectionPass(scale=1.25)]},
     "YOLOX-Nano, frame x1 + road band x1.5": {"passes": [WHOLE, BAND]},
     "YOLOX-Nano, frame x0.5 + road band x1.5": {"passes": [HALF, BAND]},
-    "YOLOX-Nano, frame x0.4 + road band x1.25, no CLAHE": {"contrast_clip": 0},
-    "YOLOX-Nano, frame x0.4 + road band x1.25 (default)": {},
+    "YOLOX-Nano, frame x0.5 + road band x1.25, no CLAHE": {"contrast_clip": 0},
+    "YOLOX-Nano, frame x0.5 + road band x1.25 (default)": {},
     "YOLO11n, frame x1": {"source": "yolo11", "passes": [WHOLE]},
     "YOLO11n, frame x1 + road band x1.5": {"source": "yolo11", "passes": [WHOLE, BAND]},
     "YOLO11n, frame x1 + road band x1.5, score 0.35": {
@@ -56,7 +56,7 @@ DETECTORS: dict[str, dict] = {
         "score_threshold": 0.35,
     },
     "YOLO11n, frame x0.5 + road band x1.5": {"source": "yolo11", "passes": [HALF, BAND]},
-    "YOLO11n, frame x0.4 + road band x1.25": {"source": "yolo11"},
+    "YOLO11n, frame x0.5 + road band x1.25": {"source": "yolo11"},
 }
 THRESHOLDS = [0.3, 0.35, 0.4, 0.5]  # the default, 0.45, has its row above
 NMS_IOUS = [0.3, 0.6]  # the default, 0.45, likewise

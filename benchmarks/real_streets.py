@@ -56,7 +56,7 @@ def _street_row(name: str, config: NeoSLAMConfig) -> dict:
         "mapped objects": len(result.objects),
         "keyframes": len(keyframes),
         "objects / keyframe": float(np.mean([len(k.labels) for k in keyframes])) if keyframes else 0.0,
-        "front end fps": perception["fps_median"],
+        "front end fps": perception["wall_fps"],
         "ATE corrected m": float(absolute_trajectory_error(result.estimate, sequence.ground_truth).rmse),
     }
 

@@ -191,7 +191,8 @@ def run_command(
     rows += [("loop closures", metrics["loops"]["accepted"]), ("objects in map", metrics["objects"])]
     rows += [("frames per second", metrics["timing"]["fps"])]
     if metrics.get("perception"):
-        rows += [("perception frames per second (median)", metrics["perception"]["fps_median"])]
+        perception = metrics["perception"]
+        rows += [("perception frames per second", perception.get("wall_fps", perception["fps_median"]))]
     if "session" in metrics:
         session = metrics["session"]
         relocalised = session["relocalised_frame"]
