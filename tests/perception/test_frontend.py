@@ -107,6 +107,7 @@ def test_frames_carry_odometry_velocities_and_objects(
     assert summary["fps_median"] > 0 and {"detection_ms_median", "stereo_ms_median", "odometry_ms_median"} <= set(
         summary
     )
+    assert summary["wall_fps"] > 0  # frames a second as the run went (how it compares is the benchmark's)
 
 
 @pytest.mark.slow
@@ -156,3 +157,22 @@ def test_file_sources_named_in_config_need_their_files(mini_sequence: KittiSeque
     pose_odometry = config.model_copy(update={"odometry": config.odometry.model_copy(update={"source": "poses"})})
     with pytest.raises(ConfigError, match="--odometry"):
         open_front_end(mini_sequence, pose_odometry)
+
+
+@pytest.mark.slow
+def test_the_overlapped_stages_give_the_frames_of_one_at_a_time_on_real_images(
+    mini_sequence: KittiSequence, perception: PerceptionConfig
+) -> None:
+    # The network, ORB and optical flow on real frames, in threads: the same detections, objects and poses, bit for
+    # bit, as one frame at a time.
+    frames = {
+        depth: list(open_front_end(mini_sequence, perception.model_copy(update={"pipeline_depth": depth})).frames())
+        for depth in (0, 2)
+    }
+    assert sum(len(f.observations) for f in frames[0]) >= 12
+    for a, b in zip(frames[0], frames[2], strict=True):
+        assert np.array_equal(a.odometry_pose, b.odometry_pose)
+        assert np.array_equal(a.linear_velocity, b.linear_velocity)
+        assert [(o.label, o.score, o.box_left.tolist(), o.center_camera.tolist()) for o in a.observations] == [
+            (o.label, o.score, o.box_left.tolist(), o.center_camera.tolist()) for o in b.observations
+        ]

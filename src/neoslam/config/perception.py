@@ -245,7 +245,7 @@ class PerceptionConfig(Section):
         2,
         ge=0,
         le=64,
-        description="frames read and detected ahead of the one being placed in 3-D and tracked, each stage in a "
-        "thread of its own (onnxruntime and OpenCV release the GIL); the frames and their order are the same as "
-        "one at a time; 0: one frame at a time",
+        description="frames waiting between two stages of the front end (read, detect, place in 3-D; the odometry "
+        "tracks in the caller's thread), each stage in a thread of its own (onnxruntime and OpenCV release the "
+        "GIL); the frames and their order are the same as one at a time; 0: one frame at a time",
     )

@@ -1,5 +1,6 @@
-"""The front end's stages overlapped: while frame k is placed in 3-D and tracked, frame k+1 is detected and the
-frames after it are read and decoded, each stage in a thread of its own with a bounded queue between stages.
+"""The front end's stages overlapped: while frame k is tracked by the odometry, frame k+1 is placed in 3-D, frame
+k+2 detected and the frames after them read and decoded, each stage in a thread of its own with a bounded queue
+between stages.
 
 Every stage still takes the frames one at a time and in order, so the frames that come out are the same, byte for
 byte, as those of the sequential front end; only the wall time differs (onnxruntime's inference and OpenCV's
