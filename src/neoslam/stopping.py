@@ -82,9 +82,16 @@ def _stop(signum: int, _frame: object) -> None:
     why = "interrupted" if signum == signal.SIGINT else f"stopped by {signal.Signals(signum).name}"
     with suppress(OSError):
         sys.stdout.flush()
+    start = "\n" if _progress_bar_open() else ""  # a bar's line ends in no newline: the note gets its own line
     with suppress(OSError):
-        os.write(2, f"neoslam: {why}; {note}\n".encode(errors="backslashreplace"))
+        os.write(2, f"{start}neoslam: {why}; {note}\n".encode(errors="backslashreplace"))
     os._exit(128 + signum)
+
+
+def _progress_bar_open() -> bool:
+    """Whether a tqdm progress bar is on stderr now (tqdm is looked up, never imported, here)."""
+    tqdm_module = sys.modules.get("tqdm.std")
+    return bool(tqdm_module is not None and getattr(tqdm_module.tqdm, "_instances", None))
 
 
 def _stop_children() -> None:

@@ -4,6 +4,7 @@ is not finite, a file name that is not UTF-8."""
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -11,7 +12,8 @@ import numpy as np
 import pytest
 
 from neoslam.config import load_config
-from neoslam.errors import ConfigError
+from neoslam.errors import ConfigError, InputError
+from neoslam.io.trajectory_files import read_trajectory
 
 
 @pytest.mark.parametrize("value", ["off", "on", "yes", "no"])
@@ -77,3 +79,20 @@ def test_a_file_name_that_is_not_utf8_is_printed_with_its_bytes_escaped(tmp_path
     run = process_cli.run("run", out, "--out", tmp_path / "results", "--map", tmp_path / "map.db", "-q")
     assert run.returncode == 0, run.stderr
     assert "in the map's frame" in run.stdout
+
+
+@pytest.mark.parametrize(
+    ("name", "text"),
+    [
+        ("huge_quaternion.txt", "0 0 0 0 0 0 0 1\n0.1 1 0 0 0 0 1e300 1\n"),
+        ("huge_rotation.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n1e300 0 0 1 0 1 0 0 0 0 1 0\n"),
+    ],
+)
+def test_a_huge_orientation_value_is_refused_without_a_numeric_warning(tmp_path: Path, name: str, text: str) -> None:
+    # A warning printed before the error line would make the refusal three lines instead of one.
+    path = tmp_path / name
+    path.write_text(text)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(InputError, match=":2: (non-unit quaternion|rotation is not orthonormal)"):
+            read_trajectory(path, "tum" if "quaternion" in name else "kitti")

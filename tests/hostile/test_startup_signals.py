@@ -23,6 +23,7 @@ pytestmark = pytest.mark.slow
 REPETITIONS = 8  # per signal; the moments spread over the start-up
 EARLIEST_S, LATEST_S = 0.05, 3.0  # after Python's own start-up (tens of ms), through the heavy imports and into the run
 STOP_WITHIN_S = 10
+BAR_SHOWN_S = 5  # the default scenario shows its first bar after 2-3 s of start-up and runs for 10 s or more
 
 
 @pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
@@ -45,3 +46,30 @@ def test_a_signal_at_any_moment_of_start_up_is_one_line_and_128_plus_n(tmp_path:
         assert process.returncode == 128 + stop, (moment, process.returncode, stderr)
         assert stderr.splitlines() == [f"neoslam: {expected}; no output written"], (moment, stderr)
         assert list(folder.iterdir()) == [], (moment, list(folder.iterdir()))
+
+
+def test_a_stop_while_the_progress_bar_shows_prints_its_line_on_a_line_of_its_own(tmp_path: Path) -> None:
+    # The bar's line ends in a carriage return, not a newline: without one before it, the note would be glued to it.
+    command = [sys.executable, "-m", "neoslam", "run", "--out", "results"]
+    process = subprocess.Popen(command, cwd=tmp_path, stderr=subprocess.PIPE, text=True, env=os.environ.copy())
+    try:
+        time.sleep(BAR_SHOWN_S)
+        process.send_signal(signal.SIGINT)
+        _, stderr = process.communicate(timeout=STOP_WITHIN_S)
+    finally:
+        process.kill()
+    assert process.returncode == 128 + signal.SIGINT, stderr
+    assert stderr.splitlines()[-1] == "neoslam: interrupted; no output written", stderr[-300:]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_open_progress_bar_is_seen_by_the_stop_handler() -> None:
+    from tqdm import tqdm
+
+    from neoslam.stopping import _progress_bar_open
+
+    assert not _progress_bar_open()
+    with tqdm(total=3, disable=False, file=sys.stderr) as bar:
+        bar.update()
+        assert _progress_bar_open()
+    assert not _progress_bar_open()

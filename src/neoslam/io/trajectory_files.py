@@ -126,7 +126,8 @@ def read_tum(path: str | Path) -> Trajectory:
     _check_magnitude(path, values[:, 1:4], lines, MAX_POSITION_M, "position")
     _check_increasing(path, values[:, 0], lines)
     quaternions = values[:, 4:8]
-    norms = np.linalg.norm(quaternions, axis=1)
+    with np.errstate(over="ignore", invalid="ignore"):  # a huge component gives an infinite norm, refused below
+        norms = np.linalg.norm(quaternions, axis=1)
     bad = np.flatnonzero(np.abs(norms - 1.0) > QUATERNION_NORM_TOLERANCE)
     if bad.size:
         i = bad[0]
@@ -151,8 +152,9 @@ def read_kitti(
     camera_poses = np.tile(np.eye(4), (len(values), 1, 1))
     camera_poses[:, :3, :] = values.reshape(-1, 3, 4)
     rotations = camera_poses[:, :3, :3]
-    errors = np.abs(rotations @ np.swapaxes(rotations, 1, 2) - np.eye(3)).max(axis=(1, 2))
-    determinants = np.linalg.det(rotations)
+    with np.errstate(over="ignore", invalid="ignore"):  # a huge entry gives an infinite error, refused below
+        errors = np.abs(rotations @ np.swapaxes(rotations, 1, 2) - np.eye(3)).max(axis=(1, 2))
+        determinants = np.linalg.det(rotations)
     bad = np.flatnonzero((errors > ROTATION_TOLERANCE) | (determinants <= 0))
     if bad.size:
         i = bad[0]
