@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import concurrent.futures
 import hashlib
+import math
 import multiprocessing
 import resource
 import time
@@ -41,13 +42,13 @@ from benchmarks._perception import MIN_IOU, SEQUENCE, _labelled_images
 from benchmarks.harness import data_root
 from benchmarks.real_streets import THIRD_PASS, TRUE_CLOSURE_M
 from neoslam.config import NeoSLAMConfig
-from neoslam.config.perception import DetectionPass
+from neoslam.config.perception import DetectionPass, DetectorConfig
 from neoslam.datasets.kitti import read_kitti_sequence
 from neoslam.datasets.replay import forward_back_forward
 from neoslam.evaluation.detection import detection_stats, match_frame
 from neoslam.geometry import invert_pose, yaw_of
 from neoslam.perception.detection import Detection, ObjectDetector, network_size, to_bgr
-from neoslam.perception.detector import make_detector
+from neoslam.perception.detector import make_detector, windows_of
 from neoslam.perception.frontend import STAGES, ImageDataset, open_front_end
 from neoslam.pipeline import run
 from neoslam.types import Frame, Trajectory
@@ -58,6 +59,7 @@ ROUNDS, QUICK_ROUNDS = 5, 2
 REPEATS = 3  # detections of each labelled frame timed in (a)
 
 HALF = DetectionPass(scale=0.5)
+KITTI_SIZE = (1226, 370)  # a KITTI odometry frame (sequences 04-12), px
 
 
 def band(scale: float, rows: tuple[float, float] = (0.32, 0.78), columns: tuple[float, float] = (0.0, 1.0)):
@@ -125,17 +127,13 @@ def open_configuration(name: str, sequence) -> tuple[NeoSLAMConfig, ImageDataset
 # --- (a) the windows' recall and cost --------------------------------------------------------------------------
 
 
-def _input_pixels(passes: list[DetectionPass], image_size: tuple[int, int]) -> int:
-    width, height = image_size
-    total = 0
-    for p in passes:
-        crop = (round((p.columns[1] - p.columns[0]) * width), round((p.rows[1] - p.rows[0]) * height))
-        w, h = network_size(*crop, p.scale)
-        total += w * h
-    return total
+def _input_pixels(detector: DetectorConfig, image_size: tuple[int, int]) -> int:
+    """The network's input pixels over the windows of one image of that size."""
+    windows = windows_of(detector, image_size)
+    return sum(math.prod(network_size(w.x1 - w.x0, w.y1 - w.y0, w.scale)) for w in windows)
 
 
-def _window_row(name: str, detector: ObjectDetector, passes: list[DetectionPass], images: list) -> dict:
+def _window_row(name: str, detector: ObjectDetector, config: DetectorConfig, images: list) -> dict:
     detector.detect(0, images[0][0])  # warm-up
     matches, times = [], []
     for repeat in range(REPEATS):
@@ -147,7 +145,7 @@ def _window_row(name: str, detector: ObjectDetector, passes: list[DetectionPass]
                 boxes = np.array([d.box for d in detections]).reshape(-1, 4)
                 matches.append(match_frame(labels, boxes, [d.label for d in detections], MIN_IOU))
     stats = detection_stats(matches)
-    row = {"windows": name, "network px (KITTI frame)": _input_pixels(passes, (1226, 370))}
+    row = {"windows": name, "network px (KITTI frame)": _input_pixels(config, KITTI_SIZE)}
     row |= stats.as_row() | {"ms / frame": float(np.median(times) * 1e3), "_stats": stats}
     return row
 
@@ -192,14 +190,14 @@ def run_windows(bench: harness.Run, args: argparse.Namespace) -> dict:
     reference = _window_row(
         "previous: frame x0.5 + band x1.5, LAB contrast",
         ThroughLab(make_detector(previous)),
-        list(previous.passes),
+        previous,
         images,
     )
     candidates = {"default": list(default.passes)} if args.quick else WINDOWS
     rows = [reference]
     for name, passes in candidates.items():
-        detector = make_detector(default.model_copy(update={"passes": passes}))
-        rows.append(_window_row(name, detector, passes, images))
+        config = default.model_copy(update={"passes": passes})
+        rows.append(_window_row(name, make_detector(config), config, images))
     _note_made(reference, _mapped_on_the_street(previous_config(), through_lab=True))
     for row, passes in zip(rows[1:], candidates.values(), strict=True):
         row["keeps the recall"] = "yes" if _keeps_recall(row, reference) else "no"

@@ -126,7 +126,11 @@ class StereoObjectConfig(Section):
 
     orb_features: int = Field(300, gt=0, le=100_000, description="most ORB keypoints detected in one box")
     orb_scale_factor: float = Field(
-        1.4, gt=1, le=4, description="ORB pyramid scale between levels (1.4: fewer levels than 1.2, the same objects)"
+        1.4,
+        gt=1,
+        le=4,
+        description="ORB pyramid scale between levels (1.4: smaller levels than 1.2 to build and search, the same "
+        "keyframes and mapped objects on KITTI)",
     )
     orb_fast_threshold: int = Field(12, gt=0, le=255, description="FAST threshold of the ORB detector")
     max_hamming: int = Field(60, gt=0, le=256, description="largest ORB descriptor distance of a stereo match, bits")

@@ -212,7 +212,8 @@ class ImageDataset:
             yield StereoPair(index, float(timestamp), left, right)
 
     def frames(self) -> Iterator[Frame]:
-        """The frames in order; with a pipeline depth, reading and detection run ahead in threads of their own."""
+        """The frames in order; with a pipeline depth, reading, detection and stereo placement run ahead in threads
+        of their own."""
         front_end = self.front_end
         handed = front_end.times.handed
         if self.pipeline_depth == 0:
