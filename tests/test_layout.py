@@ -2,8 +2,9 @@
 
 Imports are read from the source as written, including those inside functions and under TYPE_CHECKING, since each
 is a dependency all the same. Layers, lowest first: the core types, geometry, errors and text reading; the
-configuration; the cells, loop detection and maps; the SLAM system; perception, the simulator, datasets, the map
-store, file formats, evaluation and plots; the commands; sweeps; the CLI. A module never imports a higher layer.
+configuration; the cells, loop detection and maps; the SLAM system and navigation on its map; perception, the
+simulator, datasets, the map store, file formats, evaluation and plots; the commands; sweeps; the CLI. A module never
+imports a higher layer.
 """
 
 from __future__ import annotations
@@ -20,8 +21,8 @@ LAYERS: list[set[str]] = [
     {"types", "geometry", "errors", "text", "inputs", "stopping", "boxes"},
     {"config"},
     {"cells", "loop", "mapping"},
-    {"relocalisation", "pipeline"},
-    {"perception", "sim", "datasets", "store", "io", "evaluation", "viz"},
+    {"relocalisation", "pipeline", "navigation"},
+    {"perception", "sim", "datasets", "store", "io", "evaluation", "viz", "live"},
     {"commands"},
     {"sweep"},
     {"cli", "__main__"},

@@ -47,6 +47,9 @@ LeftTopicOption = Annotated[
     str | None, typer.Option(help="A bag's left camera topic (Image or CompressedImage); found when unambiguous.")
 ]
 RightTopicOption = Annotated[str | None, typer.Option(help="A bag's right camera topic; found when unambiguous.")]
+CalibrationOption = Annotated[
+    Path | None, typer.Option(metavar="FILE", help="Image folder's calibration (default: its calibration.yaml).")
+]
 
 
 def _say(text: object, err: bool = False, nl: bool = True) -> None:
@@ -121,7 +124,7 @@ def simulate(
 @app.command("run")
 def run_command(
     data: Annotated[
-        Path | None, typer.Argument(help="Dataset folder, KITTI root or ROS bag; none runs the default scenario.")
+        Path | None, typer.Argument(help="Dataset, KITTI root, bag, EuRoC or image folder; none: the default scenario.")
     ] = None,
     out: OutOption = Path("results"),
     sequence: Annotated[str | None, typer.Option(help="KITTI sequence under a KITTI odometry root, e.g. 06.")] = None,
@@ -134,6 +137,7 @@ def run_command(
     ] = None,
     left_topic: LeftTopicOption = None,
     right_topic: RightTopicOption = None,
+    calibration: CalibrationOption = None,
     odometry_topic: Annotated[
         str | None, typer.Option(help="A bag's nav_msgs/Odometry topic as the motion instead of stereo odometry.")
     ] = None,
@@ -163,14 +167,14 @@ def run_command(
     overwrite: OverwriteOption = False,
     quiet: QuietOption = False,
 ) -> None:
-    """Run NeoSLAM on a simulated dataset, a KITTI image sequence or a ROS 1 / ROS 2 bag and write the results
-    folder (trajectories, object map, pose graph, metrics, plots); with --map, as a session of a kept map."""
+    """Run NeoSLAM on a simulated dataset or stereo images (KITTI, a ROS bag, EuRoC, an image folder) and write the
+    results folder (trajectories, object map, pose graph, metrics, plots); with --map, as a session of a kept map."""
     from neoslam.commands.run import run_dataset, with_backend
     from neoslam.datasets.opening import ImageInputs
 
     try:
         settings = with_backend(load_config(config), backend)
-        inputs = ImageInputs(sequence, detections, odometry, left_topic, right_topic, odometry_topic)
+        inputs = ImageInputs(sequence, detections, odometry, left_topic, right_topic, odometry_topic, calibration)
         metrics = run_dataset(
             data,
             out,
@@ -206,11 +210,12 @@ def run_command(
 
 @app.command()
 def detect(
-    data: Annotated[Path, typer.Argument(help="KITTI odometry root (sequences/NN/image_0 ...) or ROS bag.")],
+    data: Annotated[Path, typer.Argument(help="KITTI root, ROS bag, EuRoC recording or folder of stereo images.")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Detections file to write (JSON lines).")],
     sequence: Annotated[str | None, typer.Option(help="KITTI sequence under the root, e.g. 06.")] = None,
     left_topic: LeftTopicOption = None,
     right_topic: RightTopicOption = None,
+    calibration: CalibrationOption = None,
     config: ConfigOption = None,
     overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an existing file.")] = False,
     quiet: QuietOption = False,
@@ -222,7 +227,7 @@ def detect(
 
     try:
         settings = load_config(config)
-        topics = ImageInputs(left_topic=left_topic, right_topic=right_topic)
+        topics = ImageInputs(left_topic=left_topic, right_topic=right_topic, calibration=calibration)
         counts = detect_sequence(
             data, sequence, out, settings, overwrite, progress=not quiet, read=[config], topics=topics
         )
@@ -260,6 +265,45 @@ def evaluate(
         _fail(error)
     rows = [(key, value) for key, value in metrics.items() if not isinstance(value, dict)]
     rows += [(f"loops {key}", value) for key, value in metrics.get("loops", {}).items()]
+    _say(_table(rows))
+
+
+@app.command()
+def route(
+    map_file: Annotated[Path, typer.Argument(help="Map file (SQLite) of `neoslam run --map`.")],
+    to: Annotated[
+        str, typer.Option("--to", help='Goal: "truck", "nearest car", "start", "experience 40", "12.5,-3", ...')
+    ],
+    out: OutOption,
+    start: Annotated[
+        str | None, typer.Option("--from", help="Start, in the same words (default: the experience made last).")
+    ] = None,
+    stale: Annotated[
+        bool, typer.Option("--stale", help="A stale object (not seen where it should be) may be the goal.")
+    ] = False,
+    config: ConfigOption = None,
+    overwrite: OverwriteOption = False,
+) -> None:
+    """Plan a route on a map to a place or an object and write it (route.csv, route.json, route.png); the map is
+    read only. The goal language: docs/navigation.md."""
+    from neoslam.commands.route import route_on_map
+
+    try:
+        report = route_on_map(map_file, to, out, load_config(config), start, stale, overwrite, read=[config])
+    except (NeoSLAMError, OSError) as error:
+        _fail(error)
+    planned = report.route
+    time_s = "unknown (no speed in the map)" if planned.expected_time_s is None else f"{planned.expected_time_s:.1f}"
+    rows: list[tuple[str, Any]] = [
+        ("route", out),
+        ("goal", planned.goal.description),
+        ("from", f"experience {planned.start}"),
+        ("length [m]", f"{planned.length_m:.1f}"),
+        ("expected time [s]", time_s),
+        ("waypoints", len(planned)),
+        ("objects in map", f"{report.objects} ({report.stale_objects} stale)"),
+        ("planning [ms]", f"{report.planning_ms:.2f} (graph built in {report.graph_ms:.1f})"),
+    ]
     _say(_table(rows))
 
 
@@ -320,6 +364,128 @@ def sweep(
         _say(f"neoslam: {failed} cells failed (their errors: the error column of {result.paths['csv']})",
                    err=True)  # fmt: skip
         raise typer.Exit(code=1)
+
+
+DomainOption = Annotated[
+    int | None, typer.Option("--domain-id", help="ROS 2 domain (default: $ROS_DOMAIN_ID, else 0).")
+]
+
+
+@app.command("ros2")
+def ros2_command(
+    out: Annotated[
+        Path | None, typer.Option("--out", "-o", help="Results folder written when the node stops (optional).")
+    ] = None,
+    map_path: Annotated[
+        Path | None,
+        typer.Option("--map", metavar="FILE", help="Map file to start from and extend (created if missing)."),
+    ] = None,
+    localise_only: Annotated[
+        bool, typer.Option("--localise-only", help="Relocalise in the --map and use it; change nothing in it.")
+    ] = False,
+    domain: DomainOption = None,
+    frames: Annotated[int | None, typer.Option(min=1, help="Stop after mapping this many frames.")] = None,
+    idle_exit: Annotated[
+        float | None,
+        typer.Option(min=0.0, metavar="SECONDS", help="Stop when no images came this long after some did."),
+    ] = None,
+    config: ConfigOption = None,
+    overwrite: OverwriteOption = False,
+) -> None:
+    """The live node: map a stereo camera's ROS 2 topics (live.* settings: topics, frames, QoS) and publish the
+    corrected pose, tf, path, objects, events and status until Ctrl-C or SIGTERM, then commit the map and write
+    the results. Needs no ROS installation (Cyclone DDS: pip install "neoslam\\[ros2]")."""
+    from neoslam.commands.ros2 import domain_id, run_node
+
+    def warn(line: str) -> None:
+        _say(f"neoslam: warning: {line}", err=True)
+
+    def inform(line: str) -> None:
+        _say(f"neoslam: {line}", err=True)
+
+    try:
+        settings = load_config(config)
+        chosen = domain_id(domain)
+        metrics = run_node(
+            settings, chosen, out, overwrite, [config], map_path, localise_only, frames, idle_exit, warn, inform
+        )
+    except (NeoSLAMError, OSError) as error:
+        _fail(error)
+    node = metrics["live"]
+    rows: list[tuple[str, Any]] = [("frames mapped", node["frames"]), ("stopped by", node["stopped_by"])]
+    rows += [("pairs received", node["pairs_received"]), ("pairs dropped (node busy)", node["pairs_dropped"])]
+    if "latency_ms_median" in node:
+        rows += [("latency median / p95 [ms]", f"{node['latency_ms_median']} / {node['latency_ms_p95']}")]
+    rows += [("loop closures", metrics["loops"]["accepted"]), ("objects in map", metrics["objects"])]
+    if out is not None:
+        rows.insert(0, ("results", out))
+    _say(_table(rows))
+    stopping.leave(0)  # everything is written and closed: a stopped node ends now, not after seconds of shutdown
+
+
+@app.command("ros2-play")
+def ros2_play_command(
+    data: Annotated[Path, typer.Argument(help="KITTI root, ROS bag, EuRoC recording or folder of stereo images.")],
+    sequence: Annotated[str | None, typer.Option(help="KITTI sequence under a KITTI odometry root.")] = None,
+    rate: Annotated[float | None, typer.Option(help="Frames a second (default: as fast as they can be sent).")] = None,
+    compressed: Annotated[bool, typer.Option("--compressed", help="Send PNG CompressedImage messages.")] = False,
+    frames: Annotated[
+        str | None, typer.Option(metavar="START:STOP", help="Play only these frames (Python slice, e.g. 0:20).")
+    ] = None,
+    wait: Annotated[
+        float, typer.Option(min=0.0, metavar="SECONDS", help="First wait up to this long for a subscriber.")
+    ] = 0.0,
+    left_topic: LeftTopicOption = None,
+    right_topic: RightTopicOption = None,
+    calibration: CalibrationOption = None,
+    domain: DomainOption = None,
+    config: ConfigOption = None,
+) -> None:
+    """Play a recorded stereo sequence on ROS 2 topics as a camera driver would (Image and CameraInfo on the
+    live.* topics), for trying the node without a camera."""
+    from neoslam.commands.ros2 import domain_id, play
+    from neoslam.datasets.opening import ImageInputs
+
+    try:
+        settings = load_config(config)
+        inputs = ImageInputs(sequence, left_topic=left_topic, right_topic=right_topic, calibration=calibration)
+        report = play(data, settings, domain_id(domain), inputs, rate, compressed, wait, frames)
+    except (NeoSLAMError, OSError) as error:
+        _fail(error)
+    _say(f"played {report.frames} stereo frames on ROS domain {domain_id(domain)}")
+
+
+@app.command("ros2-record")
+def ros2_record_command(
+    topics: Annotated[list[str], typer.Argument(help="Topics to record, e.g. /neoslam/odometry /tf.")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="ROS 2 bag folder to write.")],
+    storage: Annotated[str, typer.Option(help="Bag storage: sqlite3 or mcap.")] = "sqlite3",
+    discovery: Annotated[
+        float, typer.Option(min=0.0, metavar="SECONDS", help="How long to wait for the topics to appear.")
+    ] = 10.0,
+    idle_exit: Annotated[
+        float | None,
+        typer.Option(min=0.0, metavar="SECONDS", help="Stop when nothing came this long after something did."),
+    ] = None,
+    domain: DomainOption = None,
+    config: ConfigOption = None,
+    overwrite: OverwriteOption = False,
+) -> None:
+    """Record ROS 2 topics (the node's message types) into a ROS 2 bag until Ctrl-C or SIGTERM."""
+    from neoslam.commands.ros2 import domain_id, record
+
+    try:
+        settings = load_config(config)
+        def ready(found: list[str]) -> None:
+            _say(f"neoslam: recording {', '.join(found)} into {out}", err=True)
+
+        report = record(topics, out, domain_id(domain), settings, overwrite, discovery, storage, idle_exit, ready)
+    except (NeoSLAMError, OSError) as error:
+        _fail(error)
+    counts = ", ".join(f"{topic} {count}" for topic, count in report.messages.items()) or "nothing"
+    _say(f"wrote {out}: {counts}")
+    if report.missing:
+        _say(f"neoslam: warning: never published: {', '.join(report.missing)}", err=True)
 
 
 def entry() -> None:

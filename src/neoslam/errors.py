@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["NeoSLAMError", "InputError", "ConfigError", "OutputError"]
+__all__ = ["NeoSLAMError", "InputError", "ConfigError", "OutputError", "GoalError", "NoRouteError"]
 
 
 class NeoSLAMError(Exception):
@@ -28,3 +28,11 @@ class ConfigError(NeoSLAMError):
 
 class OutputError(NeoSLAMError):
     """The results folder cannot be written (for example it exists and is not empty)."""
+
+
+class GoalError(NeoSLAMError):
+    """A navigation goal that cannot be read, names nothing in the map, or names more than one place."""
+
+
+class NoRouteError(GoalError):
+    """No route on the map's links joins the start to the goal (they lie in parts of the map never linked)."""

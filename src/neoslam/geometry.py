@@ -36,6 +36,7 @@ __all__ = [
     "SimilarityTransform",
     "umeyama_alignment",
     "is_single_place",
+    "interpolated_pose",
     "integrate_body_velocities",
     "body_velocities",
     "planar_motion",
@@ -128,6 +129,25 @@ class SimilarityTransform:
 
     def as_matrix(self) -> np.ndarray:
         return make_pose(self.scale * self.rotation, self.translation)
+
+
+def interpolated_pose(times: np.ndarray, poses: np.ndarray, stamp: int, tolerance: int) -> np.ndarray | None:
+    """The pose at `stamp` from poses at sorted integer `times` (same unit): the sample at that time, or the
+    interpolation of the two around it (position linearly, rotation along the shortest arc) when both lie within
+    `tolerance` of it; None otherwise."""
+    after = int(np.searchsorted(times, stamp))
+    if after < len(times) and times[after] == stamp:
+        return poses[after]
+    if not (0 < after < len(times)) or stamp - times[after - 1] > tolerance or times[after] - stamp > tolerance:
+        return None
+    t0, t1 = times[after - 1], times[after]
+    share = (stamp - t0) / (t1 - t0)
+    start, end = poses[after - 1], poses[after]
+    pose = np.eye(4)
+    pose[:3, 3] = start[:3, 3] + share * (end[:3, 3] - start[:3, 3])
+    turn = Rotation.from_matrix(start[:3, :3].T @ end[:3, :3]).as_rotvec()
+    pose[:3, :3] = start[:3, :3] @ Rotation.from_rotvec(share * turn).as_matrix()
+    return pose
 
 
 def is_single_place(points: np.ndarray) -> bool:

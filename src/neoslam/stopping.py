@@ -6,6 +6,10 @@ It runs the clean-ups of the outputs being written at that moment (a staging fol
 created), stops the worker processes the command started, prints one line and exits with 128 + the signal's number
 (130 for Ctrl-C, 143 for SIGTERM) at once, without the interpreter's shutdown.
 
+A command that must wind down itself, such as the live node that commits its map and writes its results when it is
+stopped, runs inside `graceful(event, grace_s)`: there the first signal only sets the event, and the command stops
+as above if it has not finished `grace_s` later or on a second signal.
+
 Only the console script installs the handler (`install`); as a library, NeoSLAM leaves the signals alone and an
 interrupted call unwinds with KeyboardInterrupt as usual, its outputs removed on the way. Standard library only:
 this module is imported before anything heavy.
@@ -16,11 +20,13 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager, suppress
+from dataclasses import dataclass
 from itertools import count
 
-__all__ = ["STOP_SIGNALS", "install", "installed", "on_stop", "stop_note"]
+__all__ = ["STOP_SIGNALS", "Graceful", "graceful", "install", "installed", "leave", "on_stop", "stop_note"]
 
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 DEFAULT_NOTE = "no output written"
@@ -29,6 +35,7 @@ _cleanups: dict[int, Callable[[], object]] = {}
 _notes: dict[int, Callable[[], object]] = {}
 _ids = count()
 _installed = False
+_graceful: Graceful | None = None
 
 
 def installed() -> bool:
@@ -54,6 +61,18 @@ def _registered(table: dict[int, Callable[[], object]], entry: Callable[[], obje
         table.pop(key, None)
 
 
+def leave(code: int = 0) -> None:
+    """End the console script at once with `code`, its output flushed, without the interpreter's shutdown (which
+    takes seconds once torch, onnxruntime and DDS are loaded): for a command whose every file is written and closed
+    and that promised to stop quickly. As a library call (no handler installed) it does nothing."""
+    if not _installed:
+        return
+    for stream in (sys.stdout, sys.stderr):
+        with suppress(OSError, ValueError):
+            stream.flush()
+    os._exit(code)
+
+
 def on_stop(cleanup: Callable[[], None]) -> AbstractContextManager[None]:
     """Run `cleanup` if the command is stopped while the body runs (latest first, with the others registered)."""
     return _registered(_cleanups, cleanup)
@@ -65,9 +84,49 @@ def stop_note(note: Callable[[], str | None]) -> AbstractContextManager[None]:
     return _registered(_notes, note)
 
 
+@dataclass
+class Graceful:
+    """A command winding down itself: the event a first stop signal sets, the grace it then has, and the signal."""
+
+    event: threading.Event
+    grace_s: float
+    signum: int | None = None
+    timer: threading.Timer | None = None
+
+
+@contextmanager
+def graceful(event: threading.Event, grace_s: float) -> Iterator[Graceful]:
+    """While the body runs, a stop signal sets `event` (and the yielded record's `signum`) and the body winds down
+    itself; it is stopped as any command is `grace_s` seconds after the signal if it has not left the body by then,
+    or at a second signal. Without the console script's handler (a library call) no signal reaches it: Ctrl-C
+    raises KeyboardInterrupt as usual."""
+    global _graceful
+    state = Graceful(event, grace_s)
+    _graceful = state
+    try:
+        yield state
+    finally:
+        _graceful = None
+        if state.timer is not None:
+            state.timer.cancel()
+
+
 def _stop(signum: int, _frame: object) -> None:
-    for number in STOP_SIGNALS:  # a second Ctrl-C must not cut the clean-up short
-        signal.signal(number, signal.SIG_IGN)
+    state = _graceful
+    if state is not None and state.signum is None:
+        state.signum = signum
+        state.event.set()
+        state.timer = threading.Timer(state.grace_s, _stop_now, args=(signum,))
+        state.timer.daemon = True
+        state.timer.start()
+        return
+    _stop_now(signum)
+
+
+def _stop_now(signum: int) -> None:
+    if threading.current_thread() is threading.main_thread():  # (a graceful stop's timer cannot, nor needs to)
+        for number in STOP_SIGNALS:  # a second Ctrl-C must not cut the clean-up short
+            signal.signal(number, signal.SIG_IGN)
     for key in sorted(_cleanups, reverse=True):
         with suppress(Exception):
             _cleanups[key]()

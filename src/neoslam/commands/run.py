@@ -12,7 +12,7 @@ from typing import Any
 from neoslam.commands.run_metrics import run_metrics, session_metrics
 from neoslam.commands.simulate import DEFAULT_ROUTE, record
 from neoslam.config import NeoSLAMConfig
-from neoslam.datasets.opening import ImageInputs, open_dataset
+from neoslam.datasets.opening import Dataset, ImageInputs, open_dataset
 from neoslam.datasets.simulated import write_dataset
 from neoslam.errors import ConfigError
 from neoslam.io.atomic import atomic_directory
@@ -26,12 +26,12 @@ from neoslam.io.results import (
     write_objects,
     write_trajectories,
 )
-from neoslam.pipeline import run
-from neoslam.store.recording import check_map_path, map_recording
+from neoslam.pipeline import RunResult, run
+from neoslam.store.recording import MapRecording, check_map_path, map_recording
 from neoslam.viz.rerun_view import check_rerun_target, recording_target, rerun_session
 from neoslam.viz.run_plots import write_plots
 
-__all__ = ["run_dataset", "with_backend"]
+__all__ = ["run_dataset", "with_backend", "write_results"]
 
 
 def with_backend(config: NeoSLAMConfig, backend: str | None) -> NeoSLAMConfig:
@@ -102,19 +102,34 @@ def run_dataset(
             wall_s = time.perf_counter() - start
             if recorder is not None:
                 recorder.finish()
-        trajectories = {"trajectory": result.estimate, "odometry": result.odometry}
-        if dataset.ground_truth is not None:
-            trajectories["groundtruth"] = dataset.ground_truth
-        write_trajectories(staging, trajectories)
-        write_loop_closures(staging / "loop_closures.csv", result.loop_closures, result.closure_sessions())
-        write_objects(staging / "objects.csv", result.objects, result.moving_objects)
-        write_object_vector_cells(staging, result.object_vector_cells)
-        write_experience_map(staging / "experience_map.json", result.experience_map)
-        write_g2o(staging / "experience_map.g2o", result.experience_map)
-        write_config(staging / "config.yaml", config)
         metrics = run_metrics(dataset, result, config, wall_s)
-        if session is not None:
-            metrics["session"] = session_metrics(session, result)
-        write_metrics(staging / "metrics.json", metrics)
-        write_plots(staging / "plots", result, dataset.ground_truth, config.matching.score_threshold)
+        write_results(staging, dataset, result, config, metrics, session)
     return metrics
+
+
+def write_results(
+    staging: Path,
+    dataset: Dataset,
+    result: RunResult,
+    config: NeoSLAMConfig,
+    metrics: dict[str, Any],
+    session: MapRecording | None,
+    plots: bool = True,
+) -> None:
+    """A run's results folder (docs/results.md) into `staging`: trajectories, closures, objects, the maps, the
+    config, `metrics` (with the map session's figures added) and, with `plots`, the figures."""
+    trajectories = {"trajectory": result.estimate, "odometry": result.odometry}
+    if dataset.ground_truth is not None:
+        trajectories["groundtruth"] = dataset.ground_truth
+    write_trajectories(staging, trajectories)
+    write_loop_closures(staging / "loop_closures.csv", result.loop_closures, result.closure_sessions())
+    write_objects(staging / "objects.csv", result.objects, result.moving_objects)
+    write_object_vector_cells(staging, result.object_vector_cells)
+    write_experience_map(staging / "experience_map.json", result.experience_map)
+    write_g2o(staging / "experience_map.g2o", result.experience_map)
+    write_config(staging / "config.yaml", config)
+    if session is not None:
+        metrics["session"] = session_metrics(session, result)
+    write_metrics(staging / "metrics.json", metrics)
+    if plots:
+        write_plots(staging / "plots", result, dataset.ground_truth, config.matching.score_threshold)

@@ -4,7 +4,7 @@ Precedence, lowest first: defaults < YAML file (`--config`) < environment variab
 `NEOSLAM_<SECTION>__<FIELD>` (for example `NEOSLAM_EXPERIENCE_MAP__CORRECTION_FACTOR=0.3`).
 
 One module per area: `sensors` (camera, motion limits), `perception` (the real front end), `cells`, `loop`
-(keyframes, matching), `mapping`, `store`, `evaluation`; the simulator's settings in `simulator` and
+(keyframes, matching), `mapping`, `store`, `navigation`, `evaluation`; the simulator's settings in `simulator` and
 `simulated_world`, its calibration constants (the named detection and odometry noise profiles) in `calibration`;
 `system` puts the sections together and `loading` reads them.
 """
@@ -12,6 +12,7 @@ One module per area: `sensors` (camera, motion limits), `perception` (the real f
 from neoslam.config.calibration import DETECTION_PROFILES, NOISE_PROFILES, DetectionProfile
 from neoslam.config.cells import GridCellConfig, HeadDirectionConfig, HebbianConfig, ObjectVectorConfig
 from neoslam.config.evaluation import EvaluationConfig
+from neoslam.config.live import LiveConfig
 from neoslam.config.loading import (
     ENV_PREFIX,
     config_values,
@@ -22,6 +23,7 @@ from neoslam.config.loading import (
 )
 from neoslam.config.loop import KeyframeConfig, MatchingConfig
 from neoslam.config.mapping import ExperienceMapConfig, MovingObjectsConfig, ObjectMapConfig
+from neoslam.config.navigation import NavigationConfig
 from neoslam.config.perception import BagConfig, DetectionPass, DetectorConfig, PerceptionConfig
 from neoslam.config.sensors import CameraConfig, MotionLimitsConfig
 from neoslam.config.simulated_world import DetectionNoiseConfig, OdometryNoiseConfig, WorldConfig
@@ -52,6 +54,8 @@ __all__ = [
     "EvaluationConfig",
     "MotionLimitsConfig",
     "MapStoreConfig",
+    "NavigationConfig",
+    "LiveConfig",
     "MAP_SECTIONS",
     "PerceptionConfig",
     "DetectorConfig",

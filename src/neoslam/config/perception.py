@@ -9,6 +9,7 @@ from typing import Literal
 from pydantic import Field, model_validator
 
 from neoslam.config.base import Section
+from neoslam.config.stereo_inputs import EurocConfig, RectificationConfig
 
 __all__ = [
     "DetectionPass",
@@ -245,6 +246,8 @@ class PerceptionConfig(Section):
     stereo: StereoObjectConfig = StereoObjectConfig()
     odometry: StereoOdometryConfig = StereoOdometryConfig()
     bag: BagConfig = BagConfig()
+    rectification: RectificationConfig = RectificationConfig()
+    euroc: EurocConfig = EurocConfig()
     pipeline_depth: int = Field(
         2,
         ge=0,

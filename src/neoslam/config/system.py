@@ -7,8 +7,10 @@ from pydantic import Field
 from neoslam.config.base import Section
 from neoslam.config.cells import GridCellConfig, HeadDirectionConfig, HebbianConfig, ObjectVectorConfig
 from neoslam.config.evaluation import EvaluationConfig
+from neoslam.config.live import LiveConfig
 from neoslam.config.loop import KeyframeConfig, MatchingConfig
 from neoslam.config.mapping import ExperienceMapConfig, MovingObjectsConfig, ObjectMapConfig
+from neoslam.config.navigation import NavigationConfig
 from neoslam.config.perception import PerceptionConfig
 from neoslam.config.sensors import MotionLimitsConfig
 from neoslam.config.simulator import SimulatorConfig
@@ -46,5 +48,7 @@ class NeoSLAMConfig(Section):
     object_map: ObjectMapConfig = ObjectMapConfig()
     moving_objects: MovingObjectsConfig = MovingObjectsConfig()
     map_store: MapStoreConfig = MapStoreConfig()
+    navigation: NavigationConfig = NavigationConfig()
     evaluation: EvaluationConfig = EvaluationConfig()
     motion_limits: MotionLimitsConfig = MotionLimitsConfig()
+    live: LiveConfig = LiveConfig()

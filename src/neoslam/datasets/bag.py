@@ -20,7 +20,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from neoslam.config import CameraConfig
 from neoslam.config.perception import BagConfig
@@ -34,6 +33,7 @@ from neoslam.datasets.bag_messages import (
 )
 from neoslam.datasets.bag_topics import BagTopics, choose_topics
 from neoslam.errors import InputError, NeoSLAMError
+from neoslam.geometry import interpolated_pose
 from neoslam.inputs import check_input_file, check_input_folder_files
 from neoslam.types import Trajectory
 
@@ -343,17 +343,8 @@ def _odometry_at(path: Path, reader: Any, topic: str, stamps: np.ndarray, config
 
 
 def _pose_at(path: Path, topic: str, times: np.ndarray, poses: np.ndarray, stamp: int, tolerance: int) -> np.ndarray:
-    after = int(np.searchsorted(times, stamp))
-    if after < len(times) and times[after] == stamp:
-        return poses[after]
-    if 0 < after < len(times) and stamp - times[after - 1] <= tolerance and times[after] - stamp <= tolerance:
-        t0, t1 = times[after - 1], times[after]
-        share = (stamp - t0) / (t1 - t0)
-        start, end = poses[after - 1], poses[after]
-        pose = np.eye(4)
-        pose[:3, 3] = start[:3, 3] + share * (end[:3, 3] - start[:3, 3])
-        turn = Rotation.from_matrix(start[:3, :3].T @ end[:3, :3]).as_rotvec()
-        pose[:3, :3] = start[:3, :3] @ Rotation.from_rotvec(share * turn).as_matrix()
+    pose = interpolated_pose(times, poses, stamp, tolerance)
+    if pose is not None:
         return pose
     span = f"{times[0] / NS_PER_S:.3f}-{times[-1] / NS_PER_S:.3f} s"
     limit = f"{tolerance / 1e6:g} ms"

@@ -89,13 +89,20 @@ def grey_image(message: Any, msgtype: str) -> np.ndarray:
     return _grey_from_raw(message)
 
 
+def _octets(data: Any) -> np.ndarray:
+    """A message's uint8[] field as a flat uint8 array: rosbags gives an array, a live DDS sample bytes."""
+    if isinstance(data, bytes | bytearray | memoryview):
+        return np.frombuffer(data, dtype=np.uint8)
+    return np.asarray(data, dtype=np.uint8).reshape(-1)
+
+
 def _grey_from_raw(message: Any) -> np.ndarray:
     encoding = message.encoding
     if encoding not in GREY_ENCODINGS:
         raise MessageError(f"unsupported image encoding {encoding!r} (supported: {', '.join(GREY_ENCODINGS)})")
     channels, conversion = GREY_ENCODINGS[encoding]
     height, width, step = int(message.height), int(message.width), int(message.step)
-    data = np.asarray(message.data, dtype=np.uint8).reshape(-1)
+    data = _octets(message.data)
     if height <= 0 or width <= 0 or step < width * channels or data.size < step * height:
         raise MessageError(f"image data ({data.size} bytes, step {step}) does not hold {width}x{height} {encoding}")
     # Rows may be padded beyond width x channels bytes: `step` is the stride.
@@ -110,7 +117,7 @@ def _grey_from_compressed(message: Any) -> np.ndarray:
     fmt = str(message.format)
     if "compresseddepth" in fmt.lower():
         raise MessageError(f"unsupported image format {fmt!r} (a depth image, not a camera image)")
-    data = np.asarray(message.data, dtype=np.uint8).reshape(-1)
+    data = _octets(message.data)
     grey = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE) if data.size else None
     if grey is None:
         raise MessageError(f"compressed image (format {fmt!r}, {data.size} bytes) cannot be decoded")

@@ -82,10 +82,13 @@ def cell_metrics(cell_states: np.ndarray, odometry: Trajectory, object_vector_ce
     heading_error = np.angle(np.exp(1j * (cell_states[:, 3] - yaw_of(odometry.poses))))
     losses = object_vector_cells.loss_history
     held_out = object_vector_cells.held_out_error()
+    frames = len(position_error)  # 0: a live session stopped before its first frame
     return {
-        "grid_cells_vs_odometry_rms_m": _finite(np.sqrt(np.mean(position_error**2))),
-        "grid_cells_vs_odometry_final_m": _finite(position_error[-1]),
-        "head_direction_vs_odometry_rms_deg": _finite(np.degrees(np.sqrt(np.mean(heading_error**2)))),
+        "grid_cells_vs_odometry_rms_m": _finite(np.sqrt(np.mean(position_error**2))) if frames else None,
+        "grid_cells_vs_odometry_final_m": _finite(position_error[-1]) if frames else None,
+        "head_direction_vs_odometry_rms_deg": (
+            _finite(np.degrees(np.sqrt(np.mean(heading_error**2)))) if frames else None
+        ),
         "ovcn_epochs": len(losses),
         "ovcn_loss_first": _finite(losses[0]) if losses else None,
         "ovcn_loss_last": _finite(losses[-1]) if losses else None,

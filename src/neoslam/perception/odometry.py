@@ -225,6 +225,12 @@ class StereoOdometry:
         """The last step's T_previous_current, camera optical frame (a copy)."""
         return self._motion.copy()
 
+    def lose_track(self) -> None:
+        """Track afresh from the next frame, which starts at the current pose with no motion: a camera that stopped
+        and came back moved by an unknown amount meanwhile, and its first frame has nothing to be tracked from."""
+        self._previous = None
+        self._motion = np.eye(4)
+
     def _features(self, left: np.ndarray, right: np.ndarray, boxes: np.ndarray | None) -> StereoFeatures:
         corners = detect_corners(left, self.config, boxes)
         pixels, points = stereo_points(left, right, corners, self.camera, self.config)

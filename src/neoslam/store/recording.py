@@ -18,12 +18,13 @@ from neoslam.types import Frame, MapState
 __all__ = ["MapRecorder", "MapRecording", "check_map_path", "map_recording"]
 
 
-def check_map_path(path: Path, out: Path, inputs: Iterable[Path | None], localise_only: bool) -> None:
+def check_map_path(path: Path, out: Path | None, inputs: Iterable[Path | None], localise_only: bool) -> None:
     """Refuse a map path before any work: a link, a folder, one of the run's inputs (or inside or holding one), a
-    path inside the results folder (which a run replaces whole), or, with `localise_only`, a missing map."""
+    path inside the results folder `out` (which a run replaces whole; None: no results folder), or, with
+    `localise_only`, a missing map."""
     check_target_file(path, overwrite=True, inputs=inputs)
     resolved = path.resolve()
-    if resolved == out.resolve() or out.resolve() in resolved.parents:
+    if out is not None and (resolved == out.resolve() or out.resolve() in resolved.parents):
         raise OutputError(f"{path}: lies inside the results folder {out}, which a run replaces whole; keep it outside")
     if not path.exists():
         if localise_only:

@@ -20,27 +20,47 @@ metrics/*                 objects, keyframes, loop closures, experiences, observ
 The whole-map layers (trajectories, objects, keyframes, closures) change only a little per frame but cost their
 full size each time they are logged, so they are logged when the map changes (a keyframe, a closure) and every
 `MAP_EVERY_FRAMES` frames otherwise: a long run's recording then stays small.
+
+A viewer never costs a run. The step observer copies what a frame shows (numbers, a few arrays) and hands it to a
+`RerunSink`, whose worker thread alone calls the Rerun SDK (see neoslam.viz.rerun_sink for why). A live viewer that
+falls behind misses frames; a recording to a file gets every frame. A viewer or file that goes away mid-run is
+dropped with one warning and the run goes on; without a display, a bare `--rerun` is refused before the run.
 """
 
 from __future__ import annotations
 
+import os
 import shutil
+import sys
 import time
 import uuid
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
+from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from neoslam.errors import ConfigError
+from neoslam.errors import ConfigError, OutputError
 from neoslam.io.atomic import atomic_file
+from neoslam.viz.rerun_sink import RerunSink, SinkStartError
 
-__all__ = ["SPAWN", "RerunView", "import_rerun", "check_rerun_target", "recording_target", "rerun_session"]
+__all__ = [
+    "SPAWN",
+    "RerunView",
+    "import_rerun",
+    "check_rerun_target",
+    "has_display",
+    "recording_target",
+    "rerun_session",
+    "stderr_warning",
+]
 
 SPAWN = "spawn"  # the --rerun value that spawns the viewer instead of recording to a file
 INSTALL_HINT = 'pip install "neoslam[viewer]"'
+APPLICATION_ID = "neoslam"
 MAP_EVERY_FRAMES = 10
 JPEG_QUALITY = 80  # a grey KITTI frame: ~450 kB raw, ~40 kB as JPEG
 HEADING_ARROW_M = 3.0
@@ -48,26 +68,52 @@ HEADING_ARROW_M = 3.0
 EPOCH_STAMP_S = 1e9
 CLASS_COLOURS = {"car": (66, 133, 244), "truck": (251, 140, 0), "bicycle": (67, 160, 71), "person": (229, 57, 53)}
 OTHER_COLOUR = (158, 158, 158)
+VIEWER_EXECUTABLE = "rerun"  # the viewer rerun-sdk's spawn() starts, looked up on PATH
+# The variables a Linux (or BSD) desktop sets; the viewer's window library (winit) looks for the same three.
+DISPLAY_VARIABLES = ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET")
+ALWAYS_A_DISPLAY = ("darwin", "win32", "cygwin")  # sys.platform values whose desktop needs no variable
+SDK_LOG_FILTER = "off"  # RUST_LOG while the SDK loads: its own stderr lines about a lost sink are replaced by ours
 
 
 def import_rerun() -> Any:
-    """The rerun module, or one line saying how to install it."""
+    """The rerun module, or one line saying how to install it. The SDK reads RUST_LOG once, as it loads, and by
+    default prints several lines of its own (warnings, errors) when its sink fails; the view reports that in one
+    line instead, so the SDK loads with its log off unless the user set RUST_LOG. The variable is restored at once,
+    so that a viewer spawned later logs as the user asked."""
+    loaded = sys.modules.get("rerun")
+    if loaded is not None:
+        return loaded
+    quiet = "RUST_LOG" not in os.environ
+    if quiet:
+        os.environ["RUST_LOG"] = SDK_LOG_FILTER
     try:
         import rerun
     except ImportError:
         raise ConfigError(f"--rerun needs the Rerun viewer, an optional extra: {INSTALL_HINT}") from None
+    finally:
+        if quiet:
+            os.environ.pop("RUST_LOG", None)
     return rerun
 
 
-VIEWER_EXECUTABLE = "rerun"  # the viewer rerun-sdk's spawn() starts, looked up on PATH
+def has_display(environ: Any = os.environ, platform: str = sys.platform) -> bool:
+    """Whether a window can be opened: always on macOS and Windows; elsewhere (X11, Wayland) when the desktop's
+    variables are set."""
+    return platform in ALWAYS_A_DISPLAY or any(environ.get(name) for name in DISPLAY_VARIABLES)
 
 
 def check_rerun_target(target: str | None) -> None:
-    """Before any work: the --rerun value is SPAWN or a file ending .rrd, and Rerun is installed."""
+    """Before any work: the --rerun value is SPAWN or a file ending .rrd, a spawned viewer has a display to open
+    its window on and its executable on PATH, and Rerun is installed."""
     if target is None:
         return
     if target != SPAWN and not target.endswith(".rrd"):
         raise ConfigError(f"--rerun takes no value (spawn the viewer) or a file ending .rrd, not {target!r}")
+    if target == SPAWN and not has_display():
+        raise ConfigError(
+            "--rerun: no display to open the Rerun viewer on (neither DISPLAY nor WAYLAND_DISPLAY is set); "
+            "record to a file with --rerun FILE.rrd and open it where there is one (rerun FILE.rrd)"
+        )
     import_rerun()
     if target == SPAWN and shutil.which(VIEWER_EXECUTABLE) is None:
         raise _viewer_missing()
@@ -82,107 +128,192 @@ def recording_target(target: str | None, out: Path, staging: Path) -> str | None
     return str(staging / path.relative_to(folder)) if folder in path.parents else target
 
 
+def stderr_warning(line: str) -> None:
+    """`neoslam: warning: LINE` on stderr, on a line of its own above an open progress bar."""
+    from tqdm import tqdm
+
+    tqdm.write(f"neoslam: warning: {line}", file=sys.stderr)
+
+
 def _colours(labels: Sequence[str]) -> np.ndarray:
     return np.array([CLASS_COLOURS.get(label, OTHER_COLOUR) for label in labels], dtype=np.uint8).reshape(-1, 3)
 
 
-class RerunView:
-    """Logs each step of a run to a Rerun recording; call it as `on_step(slam, frame, pose)`."""
+@dataclass(frozen=True)
+class _MapView:
+    """The whole-map layers at one moment, copied out of NeoSLAM's state (which the next step changes)."""
 
-    def __init__(self, recording: Any, left_image: Callable[[int], np.ndarray] | None = None) -> None:
+    odometry: np.ndarray  # (n, 3)
+    corrected: np.ndarray  # (n, 3)
+    object_positions: np.ndarray  # (m, 3)
+    object_labels: list[str]
+    object_texts: list[str]
+    keyframes: np.ndarray  # (k, 3)
+    closures: np.ndarray  # (c, 2, 3)
+
+
+@dataclass(frozen=True)
+class _FrameView:
+    """What one frame shows, copied on the run's thread and logged on the sink's."""
+
+    index: int
+    timestamp: float
+    image: np.ndarray | None
+    boxes: np.ndarray  # (d, 4) XYXY
+    box_labels: list[str]
+    box_texts: list[str]
+    position: np.ndarray
+    heading: np.ndarray
+    map: _MapView | None
+    head_direction: np.ndarray
+    grid_slice: np.ndarray
+    metrics: dict[str, float]
+
+
+class RerunView:
+    """Logs each step of a run to a Rerun recording; call it as `on_step(slam, frame, pose)` from the thread that
+    drives the run. It copies what the frame shows and hands it to `sink` (see `rerun_session`)."""
+
+    def __init__(self, sink: RerunSink, left_image: Callable[[int], np.ndarray] | None = None) -> None:
         self.rr = import_rerun()
-        self.recording = recording
+        self.sink = sink
         self.left_image = left_image
         self._stamps: list[float] = []
         self._odometry: list[np.ndarray] = []
         self._keyframes = 0
         self._closures = 0
         self._last_call: float | None = None
+        self._last_frame: tuple[int, float] | None = None
         self._unlogged_map: Any = None  # the NeoSLAM whose map changed since the map layers were last logged
-        recording.log("world", self.rr.ViewCoordinates.FLU, static=True)  # REP-103, as NeoSLAM's robot frame
 
     def __call__(self, slam: Any, frame: Any, pose: np.ndarray) -> None:
-        rr, log = self.rr, self.recording.log
-        self.recording.set_time("frame", sequence=frame.index)
-        if frame.timestamp >= EPOCH_STAMP_S:
-            self.recording.set_time("time", timestamp=frame.timestamp)
-        else:
-            self.recording.set_time("time", duration=frame.timestamp)
+        if self.sink.lost:
+            return  # a viewer that went away costs the rest of the run nothing
         self._stamps.append(frame.timestamp)
         self._odometry.append(frame.odometry_pose)
-        self._log_camera(frame)
-        heading = pose[:3, 0] * HEADING_ARROW_M
-        log("world/robot", rr.Arrows3D(origins=[pose[:3, 3]], vectors=[heading], colors=[(255, 255, 255)]))
+        self._last_frame = (frame.index, frame.timestamp)
+        now = time.perf_counter()
+        # the whole frame: reading, perception, the step and this view
+        frame_ms = None if self._last_call is None else (now - self._last_call) * 1e3
+        self._last_call = now
+        if not self.sink.ready(frame.index):  # a live viewer behind: skip; the next map shows the changes
+            self._unlogged_map = slam
+            return
         keyframes, closures = len(slam.loop_detector.index.keyframes), len(slam.loop_closures)
-        if keyframes != self._keyframes or closures != self._closures or frame.index % MAP_EVERY_FRAMES == 0:
-            self._log_map(slam)
+        map_due = keyframes != self._keyframes or closures != self._closures or frame.index % MAP_EVERY_FRAMES == 0
+        view = self._frame_view(slam, frame, pose, self._map_view(slam) if map_due else None, frame_ms)
+        if not self.sink.submit(frame.index, partial(_log_frame, self.rr, view)):
+            self._unlogged_map = slam
+        elif map_due:
             self._keyframes, self._closures = keyframes, closures
             self._unlogged_map = None
         else:
             self._unlogged_map = slam
-        self._log_cells(slam)
-        self._log_metrics(slam, frame)
 
     def finish(self) -> None:
         """After the last frame: its map, if it was not logged then, so that the recording ends with the final map."""
-        if self._unlogged_map is not None:
-            self._log_map(self._unlogged_map)
-            self._unlogged_map = None
+        if self._unlogged_map is None or self._last_frame is None or self.sink.lost:
+            return
+        index, stamp = self._last_frame
+        view = self._map_view(self._unlogged_map)
+        self.sink.submit(index, partial(_log_final_map, self.rr, index, stamp, view), wait=True)
+        self._unlogged_map = None
 
-    def _log_camera(self, frame: Any) -> None:
-        rr = self.rr
-        if self.left_image is not None:
-            image = rr.Image(self.left_image(frame.index)).compress(jpeg_quality=JPEG_QUALITY)
-            self.recording.log("camera/image", image)
-        labels = [o.label for o in frame.observations]
-        boxes = np.array([o.box_left for o in frame.observations], dtype=np.float64).reshape(-1, 4)
-        texts = [f"{o.label} {o.score:.2f}" for o in frame.observations]
-        self.recording.log(
-            "camera/detections",
-            rr.Boxes2D(array=boxes, array_format=rr.Box2DFormat.XYXY, labels=texts, colors=_colours(labels)),
-        )
-
-    def _log_map(self, slam: Any) -> None:
-        """Trajectories, objects, keyframes and closures in the current (corrected) map."""
-        rr, log = self.rr, self.recording.log
-        experience_map = slam.experience_map
-        odometry = np.array(self._odometry)
-        corrected = experience_map.trajectory(np.array(self._stamps), odometry).positions
-        log("world/trajectory/odometry", rr.LineStrips3D([odometry[:, :3, 3]], colors=[(200, 200, 200)]))
-        log("world/trajectory/corrected", rr.LineStrips3D([corrected], colors=[(0, 200, 120)]))
-        objects = slam.object_map.objects(experience_map.graph.poses)
-        positions = np.array([o.position for o in objects]).reshape(-1, 3)
-        labels = [o.label for o in objects]
-        texts = [f"{o.label} {o.id}" for o in objects]
-        log("world/objects", rr.Points3D(positions, colors=_colours(labels), labels=texts, radii=0.5))
-        # A keyframe's experience was made where it was (corrected): this holds for a stored map's keyframes too.
-        place = {k: experience_map.graph.poses[e][:3, 3] for k, e in experience_map.keyframe_experiences.items()}
-        centres = [place[k.id] for k in slam.loop_detector.index.keyframes]
-        log("world/keyframes", rr.Points3D(np.array(centres).reshape(-1, 3), colors=[(255, 215, 0)], radii=0.8))
-        segments = [[place[c.match_keyframe], corrected[c.query_frame]] for c in slam.loop_closures]
-        log("world/loop_closures", rr.LineStrips3D(np.array(segments).reshape(-1, 2, 3), colors=[(255, 0, 255)]))
-
-    def _log_cells(self, slam: Any) -> None:
-        rr = self.rr
-        self.recording.log("cells/head_direction", rr.BarChart(np.asarray(slam.head_direction.activity)))
-        grid = np.asarray(slam.grid_cells.activity)
-        layer = grid[:, :, slam.grid_cells.peak[2]]
-        self.recording.log("cells/grid_slice", rr.Tensor(layer, dim_names=["x", "y"]))
-
-    def _log_metrics(self, slam: Any, frame: Any) -> None:
-        now = time.perf_counter()
-        values = {
+    def _frame_view(
+        self, slam: Any, frame: Any, pose: np.ndarray, map_view: _MapView | None, frame_ms: float | None
+    ) -> _FrameView:
+        observations = frame.observations
+        values: dict[str, float] = {
             "objects": len(slam.object_map.objects()),
             "keyframes": len(slam.loop_detector.index.keyframes),
             "loop_closures": len(slam.loop_closures),
             "experiences": len(slam.experience_map.experiences),
-            "observations": len(frame.observations),
+            "observations": len(observations),
         }
-        if self._last_call is not None:  # the whole frame: reading, perception, the step and this view
-            values["frame_ms"] = (now - self._last_call) * 1e3
-        self._last_call = now
-        for name, value in values.items():
-            self.recording.log(f"metrics/{name}", self.rr.Scalars(float(value)))
+        if frame_ms is not None:
+            values["frame_ms"] = frame_ms
+        grid = np.asarray(slam.grid_cells.activity)
+        return _FrameView(
+            index=frame.index,
+            timestamp=frame.timestamp,
+            image=self.left_image(frame.index) if self.left_image is not None else None,
+            boxes=np.array([o.box_left for o in observations], dtype=np.float64).reshape(-1, 4),
+            box_labels=[o.label for o in observations],
+            box_texts=[f"{o.label} {o.score:.2f}" for o in observations],
+            position=np.array(pose[:3, 3], dtype=np.float64),
+            heading=pose[:3, 0] * HEADING_ARROW_M,
+            map=map_view,
+            head_direction=np.array(slam.head_direction.activity, dtype=np.float64),
+            grid_slice=np.array(grid[:, :, slam.grid_cells.peak[2]]),
+            metrics=values,
+        )
+
+    def _map_view(self, slam: Any) -> _MapView:
+        """Trajectories, objects, keyframes and closures in the current (corrected) map, as copies."""
+        experience_map = slam.experience_map
+        odometry = np.array(self._odometry)
+        corrected = np.array(experience_map.trajectory(np.array(self._stamps), odometry).positions)
+        objects = slam.object_map.objects(experience_map.graph.poses)
+        # A keyframe's experience was made where it was (corrected): this holds for a stored map's keyframes too.
+        place = {k: experience_map.graph.poses[e][:3, 3] for k, e in experience_map.keyframe_experiences.items()}
+        centres = [place[k.id] for k in slam.loop_detector.index.keyframes]
+        segments = [[place[c.match_keyframe], corrected[c.query_frame]] for c in slam.loop_closures]
+        return _MapView(
+            odometry=odometry[:, :3, 3],
+            corrected=corrected,
+            object_positions=np.array([o.position for o in objects]).reshape(-1, 3),
+            object_labels=[o.label for o in objects],
+            object_texts=[f"{o.label} {o.id}" for o in objects],
+            keyframes=np.array(centres).reshape(-1, 3),
+            closures=np.array(segments).reshape(-1, 2, 3),
+        )
+
+
+# ------------------------------------------------------------------------------ logging, on the sink's thread
+
+
+def _set_time(recording: Any, index: int, stamp: float) -> None:
+    recording.set_time("frame", sequence=index)
+    if stamp >= EPOCH_STAMP_S:
+        recording.set_time("time", timestamp=stamp)
+    else:
+        recording.set_time("time", duration=stamp)
+
+
+def _log_frame(rr: Any, view: _FrameView, recording: Any) -> None:
+    _set_time(recording, view.index, view.timestamp)
+    log = recording.log
+    if view.image is not None:
+        log("camera/image", rr.Image(view.image).compress(jpeg_quality=JPEG_QUALITY))
+    boxes = rr.Boxes2D(
+        array=view.boxes, array_format=rr.Box2DFormat.XYXY, labels=view.box_texts, colors=_colours(view.box_labels)
+    )
+    log("camera/detections", boxes)
+    log("world/robot", rr.Arrows3D(origins=[view.position], vectors=[view.heading], colors=[(255, 255, 255)]))
+    if view.map is not None:
+        _log_map(rr, view.map, recording)
+    log("cells/head_direction", rr.BarChart(view.head_direction))
+    log("cells/grid_slice", rr.Tensor(view.grid_slice, dim_names=["x", "y"]))
+    for name, value in view.metrics.items():
+        log(f"metrics/{name}", rr.Scalars(float(value)))
+
+
+def _log_final_map(rr: Any, index: int, stamp: float, view: _MapView, recording: Any) -> None:
+    _set_time(recording, index, stamp)
+    _log_map(rr, view, recording)
+
+
+def _log_map(rr: Any, view: _MapView, recording: Any) -> None:
+    log = recording.log
+    log("world/trajectory/odometry", rr.LineStrips3D([view.odometry], colors=[(200, 200, 200)]))
+    log("world/trajectory/corrected", rr.LineStrips3D([view.corrected], colors=[(0, 200, 120)]))
+    colours = _colours(view.object_labels)
+    log("world/objects", rr.Points3D(view.object_positions, colors=colours, labels=view.object_texts, radii=0.5))
+    log("world/keyframes", rr.Points3D(view.keyframes, colors=[(255, 215, 0)], radii=0.8))
+    log("world/loop_closures", rr.LineStrips3D(view.closures, colors=[(255, 0, 255)]))
+
+
+# ----------------------------------------------------------------------------------------------- the session
 
 
 def _left_images(dataset: Any) -> Callable[[int], np.ndarray] | None:
@@ -195,30 +326,90 @@ def _left_images(dataset: Any) -> Callable[[int], np.ndarray] | None:
     return lambda index: sequence.stereo_pair(index)[0]
 
 
+class _RecordingLost(Exception):
+    """A recording to a file that went away: its staging file is removed, the target never appears."""
+
+
 @contextmanager
 def rerun_session(
-    target: str | None, dataset: Any, overwrite: bool = False, inputs: Sequence[Path | None] = ()
+    target: str | None,
+    dataset: Any = None,
+    overwrite: bool = False,
+    inputs: Sequence[Path | None] = (),
+    warn: Callable[[str], None] = stderr_warning,
 ) -> Iterator[RerunView | None]:
-    """The step observer of a run: None without `target`; with SPAWN a viewer is spawned; with a path ending .rrd
-    the recording is written there (whole or not at all, as any output)."""
+    """The step observer of a run: None without `target`; with SPAWN a viewer is spawned (ConfigError if it does
+    not start); with a path ending .rrd the recording is written there, whole or not at all. A viewer or file that
+    goes away during the run is given up with one `warn(line)`; the body goes on. `dataset`: where the left images
+    come from (None: no camera image)."""
     if target is None:
         yield None
         return
     check_rerun_target(target)
-    rr = import_rerun()
-    recording = rr.RecordingStream("neoslam", recording_id=uuid.uuid4())
     if target == SPAWN:
-        _spawn_viewer(recording)
-        with _viewing(recording, dataset) as view:
+
+        def viewer_lost(frame: int | None, reason: str) -> None:
+            warn(f"the Rerun viewer went away{_at(frame)} ({reason}); the run goes on without it")
+
+        with _viewing(_open_viewer, dataset, viewer_lost, blocking=False) as view:
             yield view
         return
-    with atomic_file(Path(target), overwrite, inputs) as staging:
-        recording.save(staging)
-        try:
-            with _viewing(recording, dataset) as view:
-                yield view
-        finally:
-            recording.disconnect()
+    path = Path(target)
+
+    def file_lost(frame: int | None, reason: str) -> None:
+        warn(f"the Rerun recording {path} failed{_at(frame)} ({reason}); the run goes on without it, {path} is "
+             "not written")  # fmt: skip
+
+    with suppress(_RecordingLost), atomic_file(path, overwrite, inputs) as staging:
+        with _viewing(partial(_open_file, staging), dataset, file_lost, blocking=True) as view:
+            yield view
+        if view.sink.lost:
+            raise _RecordingLost
+
+
+def _at(frame: int | None) -> str:
+    return "" if frame is None else f" at frame {frame}"
+
+
+@contextmanager
+def _viewing(
+    open_stream: Callable[[], Any], dataset: Any, on_lost: Callable[[int | None, str], None], blocking: bool
+) -> Iterator[RerunView]:
+    """The view over a sink that is open and answering; after the body, the final map and the sink's close."""
+    sink = RerunSink(open_stream, on_lost, blocking)
+    try:
+        sink.start()
+    except SinkStartError as error:
+        if blocking:
+            raise OutputError(f"--rerun: the recording could not be written ({error})") from None
+        raise ConfigError(
+            f"--rerun: the Rerun viewer did not start ({error}); record to a file with --rerun FILE.rrd"
+        ) from None
+    view = RerunView(sink, _left_images(dataset))
+    try:
+        yield view
+    except BaseException:
+        sink.abort()
+        raise
+    view.finish()
+    sink.close()
+
+
+def _open_viewer() -> Any:
+    """A recording stream sent to a spawned viewer (or to one already listening on Rerun's port)."""
+    rr = import_rerun()
+    recording = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
+    _spawn_viewer(recording)
+    recording.log("world", rr.ViewCoordinates.FLU, static=True)  # REP-103, as NeoSLAM's robot frame
+    return recording
+
+
+def _open_file(path: Path) -> Any:
+    rr = import_rerun()
+    recording = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
+    recording.save(path)
+    recording.log("world", rr.ViewCoordinates.FLU, static=True)
+    return recording
 
 
 def _spawn_viewer(recording: Any) -> None:
@@ -237,14 +428,3 @@ def _viewer_missing() -> ConfigError:
         'environment (pip install "neoslam[viewer]", then run with that environment\'s bin folder on PATH), or '
         "record to a file with --rerun FILE.rrd"
     )
-
-
-@contextmanager
-def _viewing(recording: Any, dataset: Any) -> Iterator[RerunView]:
-    """The view over a recording stream; everything logged is flushed however the run ends."""
-    try:
-        view = RerunView(recording, _left_images(dataset))
-        yield view
-        view.finish()
-    finally:
-        recording.flush()

@@ -1,0 +1,113 @@
+"""Navigation on the map: routes, goals, stale objects and guidance along a route."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from neoslam.config.base import Section
+
+__all__ = ["NavigationConfig"]
+
+
+class NavigationConfig(Section):
+    """Routes on the experience map to places and objects, and guidance along them (`neoslam route`,
+    neoslam.navigation; beyond the paper). A route follows the map's links, both ways; distances are in the map's
+    ground plane unless said otherwise."""
+
+    cost: Literal["length", "time"] = Field(
+        "length",
+        description="what a route minimises: length, metres along the links; time, the expected travel time (each "
+        "link's length over the speed its experiences were made at, or expected_speed where they recorded none)",
+    )
+    expected_speed: float = Field(
+        8.0,
+        gt=0,
+        le=100,
+        description="speed assumed on a link whose experiences recorded none (slower than min_known_speed), m/s: "
+        "the route's expected time, and its cost with cost: time (8 m/s, about 29 km/h in town)",
+    )
+    min_known_speed: float = Field(
+        0.5,
+        ge=0,
+        le=100,
+        description="an experience made slower than this (standing, starting) gives its links no speed, m/s",
+    )
+    goal_radius: float = Field(
+        10.0,
+        gt=0,
+        le=1000,
+        description="a goal that is an object or a point is reached from the experiences within this distance of "
+        "it, m: the route ends at the one whose route plus straight distance to the goal is shortest (none within: "
+        "at the nearest experience)",
+    )
+    max_goal_distance: float = Field(
+        50.0,
+        gt=0,
+        le=100_000,
+        description="a point goal farther than this from every experience is refused, m: the map does not go there",
+    )
+    arrival_radius: float = Field(
+        5.0,
+        gt=0,
+        le=1000,
+        description="guidance: the robot has arrived within this distance of the route's end (the goal's position), m",
+    )
+    look_ahead: float = Field(
+        8.0,
+        ge=0,
+        le=1000,
+        description="guidance: the next waypoint is the first route experience at least this far ahead of the "
+        "robot along the route, m (experiences are about 5 m apart: the waypoint is one or two ahead)",
+    )
+    off_route_distance: float = Field(
+        12.0,
+        gt=0,
+        le=1000,
+        description="guidance: farther than this from the route (in the ground plane), the robot has left it and "
+        "the route is planned again from where it is, m (above a corrected map's error, below a block's width)",
+    )
+    jump_distance: float = Field(
+        10.0,
+        gt=0,
+        le=1000,
+        description="guidance: a pose that moved farther than this since the previous frame was relocalised or "
+        "corrected, m: the route is planned again from where the robot now is (a car at 70 m/s and 10 Hz moves 7 m)",
+    )
+    view_range: float = Field(
+        20.0,
+        gt=0,
+        le=1000,
+        description="stale objects: an object counts as in view of an experience up to this distance, m (well "
+        "inside camera.max_range, where the detector finds nearly every object it faces)",
+    )
+    view_min_range: float = Field(
+        5.0,
+        ge=0,
+        le=1000,
+        description="stale objects: and from this distance on, m (a near object is cut by the image's border, or "
+        "passes out of view between two frames)",
+    )
+    field_of_view_deg: float = Field(
+        60.0,
+        gt=0,
+        le=360,
+        description="stale objects: the part of the camera's horizontal field of view, degrees, centred on the "
+        "robot's x axis, in which an object should be seen (KITTI's left camera sees 82; near its edges boxes are "
+        "cut by the image's border, and on the simulated block and town drives, with every object in place, the "
+        "experiences turning a corner with an object there missed it)",
+    )
+    stale_after_misses: int = Field(
+        3,
+        ge=1,
+        le=10_000,
+        description="stale objects: an object is stale once this many experiences made after its last sighting "
+        "had it in view and did not see it (a parked car that left); a stale object is no goal unless asked for",
+    )
+
+    @model_validator(mode="after")
+    def _view_band(self) -> NavigationConfig:
+        if self.view_min_range >= self.view_range:
+            raise ValueError(f"view_min_range ({self.view_min_range}) must be less than view_range ({self.view_range})")
+        return self

@@ -1,0 +1,170 @@
+"""Routes on the experience map: from where the robot is (or any place of the map) to a goal of the goal language,
+over the map's links both ways, shortest by length (or expected time: `navigation.cost`).
+
+`plan_route(map, goal)` plans once: it reads the map, builds its navigation graph and plans. `RoutePlanner` keeps
+the graph for many plans on one map (a benchmark, guidance's re-plans) and follows a running NeoSLAM's map with
+`refresh()`. A route on a running NeoSLAM starts by default from the experience the robot is in (once its session
+is in the map's frame); on a stored map from the experience made last, unless `start` names another place.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from neoslam.config import NeoSLAMConfig
+from neoslam.errors import GoalError, NoRouteError
+from neoslam.navigation.goals import Goal, parse_goal
+from neoslam.navigation.graph import NavigationGraph, ShortestPaths
+from neoslam.navigation.resolution import MapGoals, ResolvedGoal
+from neoslam.navigation.staleness import MapObjects, map_objects
+from neoslam.navigation.view import MapSource, MapView, map_view
+from neoslam.pipeline import NeoSLAM
+
+__all__ = ["Route", "RoutePlanner", "Start", "plan_route"]
+
+# Where a route starts: None (the robot's experience, or a stored map's last), an experience id, a goal (text or
+# typed) naming a place, or a position (3,) or pose (4, 4) in the map's frame (its nearest experience).
+Start = int | str | Goal | np.ndarray | None
+
+
+@dataclass(frozen=True)
+class Route:
+    """A route over the experience map, start first. Poses are the experiences' corrected poses T_map_robot (map
+    frame); `along_m` the distance along the route at each of them (0 at the start, `length_m` at the end)."""
+
+    experiences: np.ndarray  # (m,) int
+    poses: np.ndarray  # (m, 4, 4)
+    along_m: np.ndarray  # (m,)
+    length_m: float
+    expected_time_s: float | None  # None: no experience on it recorded a speed (the time would be a guess)
+    goal: ResolvedGoal
+    start: int  # the experience it starts from
+
+    def __len__(self) -> int:
+        return len(self.experiences)
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(m, 3) the waypoints' positions."""
+        return self.poses[:, :3, 3]
+
+
+class RoutePlanner:
+    """Plans routes on one map (a `MapState` or a running `NeoSLAM`), keeping its navigation graph between plans."""
+
+    def __init__(self, source: MapSource, config: NeoSLAMConfig | None = None) -> None:
+        """`config`: its `navigation` section and `object_map.min_observations` (default: a running NeoSLAM's own,
+        else the defaults)."""
+        self.source = source
+        if config is None:
+            config = source.config if isinstance(source, NeoSLAM) else NeoSLAMConfig()
+        self.config = config
+        self.view: MapView = map_view(source)
+        self.graph = NavigationGraph.build(self.view, config.navigation)
+        self._objects: MapObjects | None = None
+        self.goals = MapGoals(self.view, self.graph, config.navigation, self.objects)
+
+    def refresh(self) -> bool:
+        """Read the map again (a running NeoSLAM's grows and is corrected): new experiences and links, moved poses,
+        objects; the graph's matrix and tree are rebuilt when next used, only if something changed. Returns
+        whether the graph changed."""
+        self.view = map_view(self.source)
+        changed = self.graph.update(self.view)
+        self._objects = None  # objects gain observations every frame
+        self.goals = MapGoals(self.view, self.graph, self.config.navigation, self.objects)
+        return changed
+
+    def objects(self) -> MapObjects:
+        """The map's objects with their staleness (computed once per refresh; `.statuses()` lists them)."""
+        if self._objects is None:
+            min_observations = self.config.object_map.min_observations
+            self._objects = map_objects(self.view, self.graph, self.config.navigation, min_observations)
+        return self._objects
+
+    def start_of(self, start: Start = None) -> int:
+        """The experience a route starts from (see `Start`)."""
+        self._require_experiences()
+        if start is None:
+            if not isinstance(self.source, NeoSLAM):
+                return len(self.graph) - 1  # a stored map: the experience made last
+            if not self.view.localised or self.view.current is None:
+                raise GoalError("the robot is not localised in the map yet: its session has not relocalised in it")
+            return self.view.current
+        if isinstance(start, np.ndarray):
+            point = start[:3, 3] if start.shape == (4, 4) else start
+            return self.graph.nearest(point)[0]
+        if isinstance(start, int | np.integer) and not isinstance(start, bool):
+            if not 0 <= start < len(self.graph):
+                raise GoalError(f"start experience {start}: the map has experiences 0 to {len(self.graph) - 1}")
+            return int(start)
+        return self.goals.start_experience(parse_goal(start) if isinstance(start, str) else start)
+
+    def plan(self, goal: Goal | str, start: Start = None, stale: bool = False) -> Route:
+        """The shortest route from `start` to `goal` (text of the goal language or a typed goal) on the map as it is
+        (a running NeoSLAM's read again first); `stale` allows a stale object as the goal. GoalError (NoRouteError
+        when no route reaches it) naming the goal otherwise."""
+        goal = parse_goal(goal) if isinstance(goal, str) else goal
+        if isinstance(self.source, NeoSLAM):
+            self.refresh()
+        self._require_experiences()
+        paths = self.graph.shortest_paths(self.start_of(start))
+        return self._route(paths, self.goals.resolve(goal, paths, stale))
+
+    def replan(self, goal: ResolvedGoal, position: np.ndarray) -> Route:
+        """A route to a goal resolved before from where the robot is (`position`, map frame), on the map as it is
+        now (guidance plans again with it when the robot left the route or was relocalised). The robot joins the
+        map at the experience within `off_route_distance` of it (none: its nearest) whose straight distance plus
+        route to the goal is least, so a robot that has passed an experience joins ahead of it, not back there:
+        one Dijkstra from the goal (the links go both ways)."""
+        if isinstance(self.source, NeoSLAM):
+            self.refresh()
+        self._require_experiences()
+        end = goal.experience
+        paths = self.graph.shortest_paths(end)
+        here = np.asarray(position, dtype=float)
+        joins = self.graph.within(here, self.config.navigation.off_route_distance)
+        if len(joins) == 0:
+            joins = np.array([self.graph.nearest(here)[0]])
+        approach = np.linalg.norm(self.graph.positions[joins, :2] - here[:2], axis=1)
+        if self.config.navigation.cost == "time":
+            approach = approach / self.config.navigation.expected_speed
+        costs = paths.costs[joins] + approach
+        if not np.isfinite(costs).any():
+            raise NoRouteError(
+                f"goal {goal.text!r}: no route from experience {joins[0]} to experience {end} (they lie in parts of "
+                "the map never linked)"
+            )
+        start = int(joins[int(np.argmin(costs))])
+        position_now = self.graph.positions[end].copy()
+        moved = goal.target if goal.kind in ("point", "object") else position_now  # an experience moves with the map
+        return self._along(paths.path(start)[::-1], dataclasses.replace(goal, position=position_now, target=moved))
+
+    def _route(self, paths: ShortestPaths, goal: ResolvedGoal) -> Route:
+        if not paths.reachable(goal.experience):
+            raise NoRouteError(
+                f"goal {goal.text!r}: no route from experience {paths.start} to experience {goal.experience} "
+                "(they lie in parts of the map never linked)"
+            )
+        return self._along(paths.path(goal.experience), goal)
+
+    def _along(self, path: np.ndarray, goal: ResolvedGoal) -> Route:
+        """The route along a path of experiences, start first."""
+        steps = (path[:-1], path[1:])
+        along = np.concatenate([[0.0], np.cumsum(self.graph.lengths(*steps))])
+        expected = float(self.graph.times(*steps).sum()) if self.graph.known_speed(path) else None
+        poses = np.array(self.view.poses[path], dtype=float)
+        return Route(path, poses, along, float(along[-1]), expected, goal, int(path[0]))
+
+    def _require_experiences(self) -> None:
+        if len(self.graph) == 0:
+            raise GoalError("the map is empty: it holds no experience to plan a route on")
+
+
+def plan_route(
+    source: MapSource, goal: Goal | str, start: Start = None, config: NeoSLAMConfig | None = None, stale: bool = False
+) -> Route:
+    """The shortest route on a map (a `MapState` or a running `NeoSLAM`) from `start` to `goal`; see RoutePlanner."""
+    return RoutePlanner(source, config).plan(goal, start, stale)
