@@ -576,9 +576,9 @@ def test_missing_detector_model_is_one_line(cli, shared_data: Path, tmp_path: Pa
     _assert_one_line_error(result, ["nowhere.onnx", "YOLOX-ONNX-TFLite-Sample"])
 
 
-def test_image_options_need_a_kitti_root(cli, workspace: Path, tmp_path: Path) -> None:
+def test_image_options_need_image_inputs(cli, workspace: Path, tmp_path: Path) -> None:
     result = cli.invoke("run", workspace / "data", "--sequence", "06", "--out", tmp_path / "o", "-q")
-    _assert_one_line_error(result, ["--sequence", "KITTI image sequences only"])
+    _assert_one_line_error(result, ["--sequence", "apply to image inputs, not a simulated dataset"])
 
 
 # --- neoslam detect ---

@@ -281,3 +281,31 @@ def test_an_odometry_topic_gives_the_motion_instead_of_stereo_odometry(
     indices = [int(np.argmin(np.abs(sequence.timestamps - t))) for t in odometry.timestamps]
     expected = invert_pose(truth[indices[0]]) @ truth[indices]
     np.testing.assert_allclose(odometry.poses, expected, atol=1e-4)  # the TUM file's rounding
+
+
+def test_the_node_guides_to_a_goal_on_a_stored_map(kitti_06_51: Path, domain_id: int, tmp_path: Path, cli) -> None:
+    """A map of kitti_06_51 made offline; the node, localising only in it, is played the same street and guided
+    to the map's start: every frame's guidance is published, and the route once the session relocalised."""
+    import csv
+    import json
+
+    map_file = tmp_path / "street.db"
+    cli.ok("run", kitti_06_51, "--sequence", "06", "--map", map_file, "--out", tmp_path / "offline", "--quiet")
+    before = map_file.read_bytes()
+    results = tmp_path / "live"
+    node = _neoslam("ros2", "--map", map_file, "--localise-only", "--goal", "start of session 1", "--out", results,
+                    "--domain-id", domain_id, "--idle-exit", 3)  # fmt: skip
+    _finish(
+        _neoslam("ros2-play", kitti_06_51, "--sequence", "06", "--rate", 5, "--wait", 120, "--domain-id", domain_id)
+    )
+    _finish(node)
+    assert map_file.read_bytes() == before
+    with (results / "guidance.csv").open() as handle:
+        states = [row["state"] for row in csv.DictReader(handle)]
+    metrics = json.loads((results / "metrics.json").read_text())
+    assert len(states) == metrics["live"]["frames"] and states[0] == "not_localised"
+    guidance = metrics["guidance"]
+    assert guidance["goal"] == "start of session 1"
+    if guidance["localised_frame"] is not None:  # the session relocalised in the map: a route, then guidance on it
+        assert guidance["planned_frame"] is not None and "unreachable" not in states
+        assert set(states) & {"on_route", "replanned", "arrived"}

@@ -26,6 +26,8 @@ RUN_LIMIT_S = 120  # a probe process's whole life, loaded machine included; a ha
 STOP_WITHIN_S = 1.0  # the product's promise: from the signal to the process's exit
 EXIT_WITHIN_S = 10.0  # from the probe's last line to its exit: the interpreter's shutdown, with the SDK's exit hook
 SHORT_STALL_S = 1.0  # the probes' stall verdict (the product's is neoslam.viz.rerun_sink.STALL_S)
+QUEUE_PUT_S = 0.5  # a put into the queue, on a loaded machine (the GIL's switch interval, the scheduler)
+VERDICT_SLACK_S = 3.0  # the verdict's grace and slices, on a loaded machine
 
 
 @pytest.fixture(scope="module")
@@ -86,7 +88,7 @@ def test_a_live_view_skips_frames_rather_than_wait(rr) -> None:
         taken.append(sink.submit(i, slow_viewer))
         slowest = max(slowest, time.monotonic() - start)
     release.set()
-    assert slowest < 0.05, slowest  # a queue put, never a wait for the viewer
+    assert slowest < QUEUE_PUT_S, slowest  # a queue put, never a wait for the viewer (which would take minutes)
     assert 2 <= sum(taken) <= 3 and sink.skipped == 50 - sum(taken)  # the job under way and a full queue
     assert sink.submit(50, _scalar(50, 1.0), wait=True)  # the final map waits for room
     assert sink.close() and not lost
@@ -236,16 +238,17 @@ def test_a_sink_that_stops_reading_is_given_up_and_the_process_exits(rr, never_r
     finally:
         process.kill()
     assert lost["reason"] == f"no answer for {SHORT_STALL_S:g} s", lost
-    assert end["closed"] is False and end["slowest"] < SHORT_STALL_S + 2.5, end  # the stall, a grace, a slice
+    assert end["closed"] is False and end["slowest"] < SHORT_STALL_S + VERDICT_SLACK_S, end  # bounded by the stall
     assert process.returncode == 0 and stderr == "", stderr  # no traceback, not one line of the SDK's own
     assert exit_s < EXIT_WITHIN_S, exit_s  # the SDK's exit hook would wait for the stream forever
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_signal_stops_the_caller_within_a_second_whatever_the_sink(rr, never_reads: int, stop) -> None:
     # Moments before and after the stall verdict: the caller waits for room in the queue, then skips.
-    for moment in sorted(random.Random(f"sink {stop.name}").uniform(0.0, 2 * SHORT_STALL_S + 1) for _ in range(3)):
+    moments = random.Random(f"sink {stop.name}")
+    for moment in sorted(moments.uniform(0.0, 2 * SHORT_STALL_S + 1) for _ in range(3)):
         process = _probe(never_reads, "signal")
         try:
             assert _next_line(process) == {"started": True}
@@ -258,6 +261,7 @@ def test_a_signal_stops_the_caller_within_a_second_whatever_the_sink(rr, never_r
             stderr = process.stderr.read()
         finally:
             process.kill()
+        print(f"{stop.name} {moment:.2f} s into the probe: stopped in {stop_s:.3f} s")  # shown by pytest -rP
         assert process.returncode == 128 + stop, (moment, process.returncode, stderr)
         assert stop_s < STOP_WITHIN_S, (moment, stop_s)
         assert "Traceback" not in stderr and stderr.strip().splitlines()[-1].startswith("neoslam: "), stderr

@@ -1,11 +1,14 @@
 """The live view (`neoslam run --rerun`): a run recorded to an .rrd file and read back with Rerun's own reader has
 every entity, one row per frame on the `frame` and `time` timelines, and ends with the final map; without Rerun
-installed `--rerun` says how to install it; a bare `--rerun` spawns the viewer."""
+installed `--rerun` says how to install it; a bare `--rerun` spawns the viewer, and is refused before the run where
+there is no display. (A viewer that fails: tests/hostile/test_viewer.py and test_rerun_sink.py.)"""
 
 from __future__ import annotations
 
 import json
 import os
+import signal
+import socket
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -74,7 +77,8 @@ def rerun_module(extra):
 def block_run(cli, rerun_module, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict, Recording]:
     root = tmp_path_factory.mktemp("rerun")
     data = _simulate(cli, root, BLOCK_FRAMES)
-    cli.ok("run", data, "--rerun", root / "out" / "block.rrd", "--out", root / "out", "-q")  # in the results folder
+    result = cli.ok("run", data, "--rerun", root / "out" / "block.rrd", "--out", root / "out", "-q")  # in the folder
+    assert result.stderr == ""  # a healthy recording: no warning
     metrics = json.loads((root / "out" / "metrics.json").read_text())
     return root / "out", metrics, Recording(root / "out" / "block.rrd")
 
@@ -129,27 +133,66 @@ def test_an_image_sequence_logs_its_left_images(cli, rerun_module, shared_data: 
 
 
 @pytest.mark.slow
-def test_a_bare_rerun_spawns_the_viewer(cli, rerun_module, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    spawned = []
-    monkeypatch.setattr(rerun_module.RecordingStream, "spawn", lambda self, **kwargs: spawned.append(kwargs))
-    viewer = tmp_path / "bin" / "rerun"  # a stand-in for the viewer executable, found on PATH
+def test_a_bare_rerun_starts_the_viewer_or_uses_the_one_listening(
+    cli, rerun_module, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import rerun_cli
+
+    from neoslam.viz import rerun_target
+
+    real = Path(rerun_cli.__file__).with_name("rerun")
+    if not real.exists():
+        pytest.skip(f"the Rerun viewer's binary is not at {real}")
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    monkeypatch.setattr(rerun_target, "VIEWER_PORT", port)
+    # A stand-in for the viewer, found on PATH: the real Rerun server without a window, on the port it is given.
+    viewer, started, pid = tmp_path / "bin" / "rerun", tmp_path / "started.txt", tmp_path / "viewer.pid"
     viewer.parent.mkdir()
-    viewer.write_text("#!/bin/sh\n")
+    viewer.write_text(f'#!/bin/sh\necho "$@" >> "{started}"\necho $$ > "{pid}"\nexec "{real}" --serve-grpc "$1"\n')
     viewer.chmod(0o755)
     monkeypatch.setenv("PATH", f"{viewer.parent}{os.pathsep}{os.environ.get('PATH', '')}")
+    monkeypatch.setenv("DISPLAY", ":0")
     data = _simulate(cli, tmp_path, 30)
-    cli.ok("run", data, "--out", tmp_path / "out", "--rerun", "-q")
-    cli.ok("run", data, "--rerun", "--out", tmp_path / "out2", "-q")  # DATA before it is not taken as the file
-    assert len(spawned) == 2
+    try:
+        first = cli.ok("run", data, "--out", tmp_path / "out", "--rerun", "-q")
+        second = cli.ok("run", data, "--rerun", "--out", tmp_path / "out2", "-q")  # DATA before it is not the file
+    finally:
+        if pid.exists():
+            os.kill(int(pid.read_text()), signal.SIGKILL)
+    assert first.stderr == second.stderr == ""
+    assert started.read_text().splitlines() == [f"--port={port} --memory-limit=75% --expect-data-soon"]  # once
 
 
 def test_without_the_viewer_executable_a_bare_rerun_says_how_to_get_it(
     cli, rerun_module, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setenv("PATH", str(tmp_path / "empty"))
+    monkeypatch.setenv("DISPLAY", ":0")
     data = _simulate(cli, tmp_path, 30)
     result = cli.invoke("run", data, "--rerun", "--out", tmp_path / "out", "-q")
     line = cli.one_line_error(result, "Rerun viewer (`rerun`) is not on PATH", "--rerun FILE.rrd")
+    assert line and not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("variable", ["DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"])
+def test_a_display_is_one_of_the_desktops_variables_or_a_desktop_platform(variable: str) -> None:
+    from neoslam.viz.rerun_view import has_display
+
+    assert has_display({variable: ":0"}, "linux") and has_display({variable: "wayland-0"}, "freebsd14")
+    assert not has_display({}, "linux") and not has_display({variable: ""}, "linux")
+    assert has_display({}, "darwin") and has_display({}, "win32")
+
+
+def test_without_a_display_a_bare_rerun_is_refused_before_the_run(
+    cli, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    for variable in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET"):
+        monkeypatch.delenv(variable, raising=False)
+    monkeypatch.setattr(sys, "platform", "linux")
+    result = cli.invoke("run", tmp_path / "nowhere", "--rerun", "--out", tmp_path / "out", "-q")  # before the data
+    line = cli.one_line_error(result, "no display", "DISPLAY", "--rerun FILE.rrd")
     assert line and not (tmp_path / "out").exists()
 
 

@@ -17,6 +17,7 @@ from neoslam.config import NeoSLAMConfig
 from neoslam.datasets.opening import ImageInputs, open_stereo_sequence
 from neoslam.errors import ConfigError
 from neoslam.io.atomic import atomic_directory, check_target
+from neoslam.io.route_files import write_guidance_csv
 from neoslam.store.recording import check_map_path, map_recording
 
 __all__ = ["INSTALL_HINT", "domain_id", "run_node", "play", "record", "live_metrics"]
@@ -85,11 +86,17 @@ def run_node(
     idle_exit_s: float | None = None,
     warn: Callable[[str], None] = print,
     inform: Callable[[str], None] | None = None,
+    goal: str | None = None,
+    stale_goal: bool = False,
 ) -> dict[str, Any]:
     """Run the live node until Ctrl-C or SIGTERM (or `max_frames`, or `idle_exit_s` without images), then commit
-    the map and write the results folder `out` (if given). Returns the session's metrics."""
+    the map and write the results folder `out` (if given). `goal`: guide to it (see `neoslam run --goal`).
+    Returns the session's metrics."""
     _import_live()
     from neoslam.live.node import LiveNode
+    from neoslam.navigation.session import GoalGuidance
+
+    guidance = GoalGuidance(goal, config, stale_goal) if goal is not None else None
 
     if out is not None:
         check_target(out, overwrite, list(read))
@@ -105,12 +112,16 @@ def run_node(
         stored = session.stored if session is not None else None
         recorder = session.recorder if session is not None else None
         finish = recorder.finish if recorder is not None else None
-        node = LiveNode(config, domain, stored, session_name, recorder, warn, inform, on_finish=finish)
+        node = LiveNode(config, domain, stored, session_name, recorder, warn, inform, finish, guidance)
         live_run = node.run(stop, max_frames, idle_exit_s)
         metrics = live_metrics(live_run, config, session_name)
         if state.signum is not None:
             metrics["live"]["stopped_by"] = f"signal {state.signum}"
+        if guidance is not None:
+            metrics["guidance"] = guidance.summary()
         if staging is not None:
+            if guidance is not None:
+                write_guidance_csv(staging / "guidance.csv", guidance.records)
             # no plots: they take seconds, and a stopped node has less than one to write its results
             write_results(staging, _Named(session_name, live_run), live_run.result, config, metrics, session, False)
     return metrics

@@ -26,6 +26,8 @@ from neoslam.io.results import (
     write_objects,
     write_trajectories,
 )
+from neoslam.io.route_files import write_guidance_csv
+from neoslam.navigation.session import GoalGuidance
 from neoslam.pipeline import RunResult, run
 from neoslam.store.recording import MapRecording, check_map_path, map_recording
 from neoslam.viz.rerun_view import check_rerun_target, recording_target, rerun_session
@@ -67,13 +69,17 @@ def run_dataset(
     rerun: str | None = None,
     map_path: Path | None = None,
     localise_only: bool = False,
+    goal: str | None = None,
+    stale_goal: bool = False,
 ) -> dict[str, Any]:
     """Run NeoSLAM on a dataset folder, KITTI sequence or ROS bag (or simulate the default scenario first) and
     write the results folder. `read` names further files the run reads (a config file), which the output must not
     replace. `rerun`: "spawn" shows the run live in the Rerun viewer, a path ending .rrd records it there.
     `map_path`: a map file the run starts from and extends (created if missing; see neoslam.store), written as the
-    run goes; with `localise_only` the run uses it and changes nothing in it."""
+    run goes; with `localise_only` the run uses it and changes nothing in it. `goal`: guidance towards it (the
+    goal language of neoslam.navigation; `stale_goal` allows a stale object), written per frame to guidance.csv."""
     check_rerun_target(rerun)
+    guidance = GoalGuidance(goal, config, stale_goal) if goal is not None else None
     read_paths = [data, *inputs.files(), *read]
     if map_path is not None:
         check_map_path(map_path, out, read_paths, localise_only)
@@ -95,7 +101,7 @@ def run_dataset(
                 config,
                 total=len(dataset),
                 progress=progress,
-                on_step=_observers(on_step, recorder),
+                on_step=_observers(on_step, recorder, guidance),
                 stored=stored,
                 session_name=dataset.name,
             )
@@ -103,6 +109,9 @@ def run_dataset(
             if recorder is not None:
                 recorder.finish()
         metrics = run_metrics(dataset, result, config, wall_s)
+        if guidance is not None:
+            metrics["guidance"] = guidance.summary()
+            write_guidance_csv(staging / "guidance.csv", guidance.records)
         write_results(staging, dataset, result, config, metrics, session)
     return metrics
 

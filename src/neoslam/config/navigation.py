@@ -106,6 +106,15 @@ class NavigationConfig(Section):
         "had it in view and did not see it (a parked car that left); a stale object is no goal unless asked for",
     )
 
+    confirm_radius: float = Field(
+        3.0,
+        gt=0,
+        le=100,
+        description="guidance to an object: an observation of the goal's class this close to the goal object (in "
+        "the map, at the robot's pose) is a sighting of it, m; arriving without one since the route was planned is "
+        "reported missing, not arrived (a parked car that left)",
+    )
+
     @model_validator(mode="after")
     def _view_band(self) -> NavigationConfig:
         if self.view_min_range >= self.view_range:

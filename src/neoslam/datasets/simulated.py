@@ -15,7 +15,7 @@ DATASET/
 
 from __future__ import annotations
 
-from collections.abc import Collection
+from collections.abc import Collection, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,11 +31,20 @@ from neoslam.io.detection_checks import box_problem, centre_problem, label_probl
 from neoslam.io.motion_limits import check_time_steps, check_velocities
 from neoslam.io.tables import numeric_column, read_table, write_table
 from neoslam.io.trajectory_files import read_tum, write_tum
+from neoslam.sim.detections import SimulatedDetection
 from neoslam.sim.simulator import SimulatedRecording
 from neoslam.text import read_yaml
 from neoslam.types import Frame, ObjectObservation, Trajectory
 
-__all__ = ["FORMAT", "VERSION", "SimulatedDataset", "write_dataset", "read_dataset", "is_simulated_dataset"]
+__all__ = [
+    "FORMAT",
+    "VERSION",
+    "SimulatedDataset",
+    "write_dataset",
+    "read_dataset",
+    "is_simulated_dataset",
+    "simulated_observations",
+]
 
 FORMAT = "neoslam-sim"
 VERSION = 1
@@ -69,15 +78,43 @@ def write_dataset(folder: Path, recording: SimulatedRecording) -> None:
     detection_rows, truth_rows, patches = [], [], []
     for frame, detections in enumerate(recording.detections):
         for d in detections:
-            boxes = (f"{v:.2f}" for v in np.concatenate([d.box_left, d.box_right]))
-            centre = (f"{v:.4f}" for v in d.center_camera)
             truth_rows.append([len(detection_rows), d.object_id])
-            detection_rows.append([frame, d.label, f"{d.score:.4f}", *boxes, *centre])
+            detection_rows.append([frame, *_detection_values(d)])
             patches.append(d.patch)
     size = recording.config.detection.patch_size
     write_table(folder / "detections.csv", DETECTION_COLUMNS, detection_rows)
     np.save(folder / "patches.npy", np.asarray(patches, dtype=np.uint8).reshape(-1, size, size))
     _write_truth(folder / "truth", recording, truth_rows)
+
+
+def _detection_values(detection: SimulatedDetection) -> list[str]:
+    """A detection as detections.csv holds it, after the frame: label, score, left and right boxes, centre."""
+    boxes = (f"{v:.2f}" for v in np.concatenate([detection.box_left, detection.box_right]))
+    centre = (f"{v:.4f}" for v in detection.center_camera)
+    return [detection.label, f"{detection.score:.4f}", *boxes, *centre]
+
+
+def _observation(
+    label: str, score: float, boxes: np.ndarray, centre: np.ndarray, patch: np.ndarray
+) -> ObjectObservation:
+    """An observation from a detections.csv row's values (boxes: left then right) and its patch."""
+    return ObjectObservation(label, score, boxes[:4], boxes[4:], centre, patch)
+
+
+def simulated_observations(
+    detections: Iterable[SimulatedDetection], classes: Collection[str] | None = None
+) -> tuple[ObjectObservation, ...]:
+    """A frame's simulated detections as the reader gives them from a dataset folder they were written to: the values
+    rounded as detections.csv holds them, detections of other labels than `classes` (when given) left out. For a
+    simulation run in memory, frame by frame (a robot driven in closed loop)."""
+    observations = []
+    for detection in detections:
+        label, score, *numbers = _detection_values(detection)
+        if classes is not None and label not in classes:
+            continue
+        values = np.array(numbers, dtype=float)
+        observations.append(_observation(label, float(score), values[:8], values[8:], detection.patch))
+    return tuple(observations)
 
 
 def _write_truth(folder: Path, recording: SimulatedRecording, detection_objects: list[list[int]]) -> None:
@@ -212,9 +249,7 @@ def _read_detections(
             raise InputError(path, problem, line=line)
         if classes is not None and row[1] not in classes:
             continue
-        per_frame[int(frame)].append(
-            ObjectObservation(row[1], float(values["score"][k]), box[:4], box[4:], centre, patches[k])
-        )
+        per_frame[int(frame)].append(_observation(row[1], float(values["score"][k]), box, centre, patches[k]))
         rows_of[int(frame)].append(k)
     return tuple(tuple(observations) for observations in per_frame), tuple(tuple(rows) for rows in rows_of)
 

@@ -14,8 +14,9 @@ import numpy as np
 from neoslam.geometry import yaw_of
 from neoslam.io.tables import write_table
 from neoslam.navigation import ObjectStatus, Route
+from neoslam.navigation.session import GUIDANCE_COLUMNS, GuidanceRecord
 
-__all__ = ["ROUTE_COLUMNS", "route_features", "write_route_csv", "write_route_json"]
+__all__ = ["ROUTE_COLUMNS", "route_features", "write_guidance_csv", "write_route_csv", "write_route_json"]
 
 ROUTE_COLUMNS = ("waypoint", "experience", "x", "y", "z", "yaw", "distance_m")
 _METRES = 4  # decimals of a distance or coordinate: 0.1 mm
@@ -104,3 +105,23 @@ def _object_properties(found: ObjectStatus) -> dict[str, Any]:
 
 def write_route_json(path: Path, route: Route) -> None:
     path.write_text(json.dumps(route_features(route), allow_nan=False) + "\n")
+
+
+def _cell(value: object) -> object:
+    """A guidance cell: rounded metres and degrees, empty for none, booleans as 0 and 1."""
+    if value is None:
+        return ""
+    if isinstance(value, bool):
+        return int(value)
+    if isinstance(value, float):
+        return f"{_metres(value):.{_METRES}f}"
+    return value
+
+
+def write_guidance_csv(path: Path, records: list[GuidanceRecord]) -> None:
+    """A run's guidance (`neoslam run --goal`), a row per frame: its state (not_localised, on_route, off_route,
+    replanned, arrived, missing, unreachable), the next waypoint (experience, x, y in the map frame), the distance and
+    bearing to it (m, degrees in the robot frame, positive left), the distance left along the route, straight to
+    the goal and from the route, and whether an object goal was seen."""
+    rows = [[_cell(value) for value in record.row().values()] for record in records]
+    write_table(path, GUIDANCE_COLUMNS, rows)

@@ -28,6 +28,7 @@ from neoslam.live.outputs import Outputs
 from neoslam.live.receiver import Counters, Receiver, StereoMessages
 from neoslam.live.reporting import LiveStatus, missing_images
 from neoslam.live.transport import Ros2Domain
+from neoslam.navigation.session import GoalGuidance
 from neoslam.perception.detection import ObjectDetector
 from neoslam.perception.detector import make_detector
 from neoslam.perception.frontend import StereoFrontEnd, StereoMotion
@@ -118,10 +119,12 @@ class LiveNode:
         warn: Callable[[str], None] = print,
         inform: Callable[[str], None] | None = None,
         on_finish: Callable[[], None] | None = None,
+        guidance: GoalGuidance | None = None,
     ) -> None:
         """`on_step(slam, frame, pose)` after each frame (a map file's commits, a viewer); `on_finish()` first thing
         once the session is over (the map's last commit: a stop signal leaves little time); `warn` and `inform`
-        print a line (a problem; the first frame mapped)."""
+        print a line (a problem; the first frame mapped). `guidance`: guide to its goal, publishing the route and
+        each frame's guidance."""
         if config.perception.detector.source == "file":
             raise ConfigError("the live node detects objects itself: perception.detector.source 'file' is for "
                               "recorded sequences; choose yolox or yolo11")  # fmt: skip
@@ -134,6 +137,8 @@ class LiveNode:
         self.warn = warn
         self.inform = inform
         self.on_finish = on_finish
+        self.guidance = guidance
+        self._route_shown: Any = None
         self.detector: ObjectDetector = make_detector(config.perception.detector)  # loads the network now
         self._camera: LiveCamera | None = None
         self._front_end: StereoFrontEnd | None = None
@@ -148,7 +153,7 @@ class LiveNode:
         domain = Ros2Domain(self.domain_id)
         receiver = None
         try:
-            outputs = Outputs(domain, self.live)
+            outputs = Outputs(domain, self.live, guided=self.guidance is not None)
             domain.start_discovery()
             receiver = Receiver(domain, self.live)
             receiver.start()
@@ -228,6 +233,8 @@ class LiveNode:
         track.odometry.append(frame.odometry_pose)
         if self.on_step is not None:
             self.on_step(slam, frame, pose)
+        if self.guidance is not None:
+            self._guide(slam, frame, pose, outputs, pair.stamp_ns)
         if len(track.stamps_ns) == 1 and self.inform is not None:
             self.inform(self._first_frame_line(pair.stamp_ns))
         self._publish_events(slam, outputs, shown, pair.stamp_ns)
@@ -300,6 +307,17 @@ class LiveNode:
         while (receiver.odometry.newest_stamp() or -1) < stamp and time.monotonic() < deadline:
             time.sleep(ODOMETRY_POLL_S)
         return receiver.odometry.pose_at(stamp, round(self.live.odometry_tolerance_s * NS_PER_S))
+
+    def _guide(self, slam: NeoSLAM, frame: Frame, pose: np.ndarray, outputs: Outputs, stamp: int) -> None:
+        """The frame's guidance published, and the route whenever it is a new one."""
+        assert self.guidance is not None
+        self.guidance(slam, frame, pose)
+        assert self.guidance.latest is not None
+        outputs.guidance(self.guidance.latest.row(), stamp)
+        route = self.guidance.route
+        if route is not None and route is not self._route_shown:
+            self._route_shown = route
+            outputs.route(route.poses, stamp)
 
     def _first_frame_line(self, stamp: int) -> str:
         assert self._camera is not None

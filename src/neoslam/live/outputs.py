@@ -8,14 +8,19 @@
 | NAMESPACE/objects | visualization_msgs/MarkerArray | reliable, transient local, keep last 1 | with the path: the object map |
 | NAMESPACE/events | std_msgs/String (JSON) | reliable, transient local, keep last 100 | a loop closure or a relocalisation, as it happens |
 | NAMESPACE/status | diagnostic_msgs/DiagnosticArray | reliable, keep last 10 | every `status_period_s` |
+| NAMESPACE/route | nav_msgs/Path | reliable, transient local, keep last 1 | with `--goal`: the route, when planned (again) |
+| NAMESPACE/guidance | std_msgs/String (JSON) | reliable, keep last 10 | with `--goal`: every frame's guidance |
 
 An event is one JSON object: `{"event": "loop_closure", "stamp_ns": ..., "query_frame", "match_frame",
 "query_keyframe", "match_keyframe", "score", "matches", "relative_pose"}` (T_match_query, 16 numbers row-major) or
-`{"event": "relocalised", "stamp_ns": ..., "frame", "map_keyframe"}` (a session of a stored map joined it).
+`{"event": "relocalised", "stamp_ns": ..., "frame", "map_keyframe"}` (a session of a stored map joined it). Guidance
+is one JSON object a frame: the columns of a run's guidance.csv (neoslam.navigation.session) and `stamp_ns`.
 """  # noqa: E501
 
 from __future__ import annotations
 
+import json
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -57,13 +62,16 @@ def output_topics(config: LiveConfig) -> dict[str, str]:
         f"{ns}/objects": "visualization_msgs/msg/MarkerArray",
         f"{ns}/events": "std_msgs/msg/String",
         f"{ns}/status": "diagnostic_msgs/msg/DiagnosticArray",
+        f"{ns}/route": "nav_msgs/msg/Path",
+        f"{ns}/guidance": "std_msgs/msg/String",
     }
 
 
 class Outputs:
     """The node's writers: the pose and tf every frame, the path and objects when the map changes, events, status."""
 
-    def __init__(self, domain: Ros2Domain, config: LiveConfig) -> None:
+    def __init__(self, domain: Ros2Domain, config: LiveConfig, guided: bool = False) -> None:
+        """`guided`: the node guides to a goal, and publishes the route and the guidance too."""
         self.config = config
         topics = list(output_topics(config))
         self._odometry = domain.writer(topics[0], Odometry, state_qos(ODOMETRY_DEPTH))
@@ -72,7 +80,12 @@ class Outputs:
         self._objects = domain.writer(topics[3], MarkerArray, map_qos())
         self._events = domain.writer(topics[4], String, event_qos(EVENTS_DEPTH))
         self._status = domain.writer(topics[5], DiagnosticArray, state_qos(STATUS_DEPTH))
-        self._writers = (self._odometry, self._tf, self._path, self._objects, self._events, self._status)
+        self._writers = [self._odometry, self._tf, self._path, self._objects, self._events, self._status]
+        self._route = self._guidance = None
+        if guided:
+            self._route = domain.writer(topics[6], Path, map_qos())
+            self._guidance = domain.writer(topics[7], String, state_qos(STATUS_DEPTH))
+            self._writers += [self._route, self._guidance]
 
     def pose(self, frame: Frame, pose: np.ndarray, stamp: int) -> None:
         """The corrected pose T_map_robot of a frame, as odometry and as tf (map -> odom -> robot)."""
@@ -107,6 +120,16 @@ class Outputs:
 
     def relocalised(self, frame: int, map_keyframe: int | None, stamp: int) -> None:
         self._events.write(event_message("relocalised", stamp, frame=frame, map_keyframe=map_keyframe))
+
+    def route(self, poses: np.ndarray, stamp: int) -> None:
+        """A route's waypoints (the experiences' corrected poses) as a path, all stamped with the frame's stamp."""
+        assert self._route is not None
+        self._route.write(path_message(poses, [stamp] * len(poses), self.config.map_frame, stamp))
+
+    def guidance(self, row: dict[str, Any], stamp: int) -> None:
+        assert self._guidance is not None
+        finite = {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in row.items()}
+        self._guidance.write(String(data=json.dumps({"stamp_ns": int(stamp), **finite}, allow_nan=False)))
 
     def status(self, level: str, message: str, values: dict[str, Any], stamp: int) -> None:
         self._status.write(status_message(STATUS_NAME, level, message, values, stamp))

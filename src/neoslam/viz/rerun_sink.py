@@ -5,9 +5,10 @@ Why: the SDK's calls block in native code when its sink stops answering, and a P
 the main thread, between bytecodes, so a main thread inside such a call never stops, whatever signal it gets.
 Measured with rerun-sdk 0.41: `flush()` (default timeout 1e38 s) waits forever for a spawned viewer that died at
 start; `disconnect()` and the SDK's own exit hook (atexit) wait forever for a viewer that accepts the connection and
-never reads, and for a file whose disk is full; `spawn()` waits for the `rerun` executable it runs first
-(`rerun --version`) to exit. Here the caller's thread waits only on Python locks and queues, in slices of
-`WAIT_SLICE_S`, so a stop signal reaches it within a slice, and never longer than the sink goes on answering.
+never reads, and for a file whose disk is full; `connect_grpc()` waits 5 s for a viewer that is not listening. Here
+the caller's thread waits only on Python locks and queues, in slices of `WAIT_SLICE_S`, so a stop signal reaches it
+within a slice, and never longer than the sink goes on answering. (These calls release the GIL while they wait;
+`spawn()` does not, which is why neoslam.viz.rerun_target starts the viewer itself.)
 
 The sink is judged by the worker's calls: one that raises (a severed gRPC connection, a write error) or one that
 has not returned `stall_s` after it began means the sink went away. The worker asks the sink for a flush every
@@ -36,7 +37,7 @@ __all__ = ["QUEUE_FRAMES", "STALL_S", "RerunSink", "SinkStartError"]
 
 QUEUE_FRAMES = 64  # ~3 s of a camera at 20 Hz; each job holds copies of its frame's data, the map's O(frames)
 STALL_S = 5.0  # a call not back in this long: the sink went away (a healthy viewer answers in milliseconds)
-START_WAIT_S = 30.0  # spawning the viewer: `rerun --version`, the viewer's start (the SDK waits ~5 s) and a flush
+START_WAIT_S = 30.0  # opening: a viewer's start (rerun_target.VIEWER_START_S), its connection, a first flush
 HEALTH_EVERY_S = 1.0  # how often the worker flushes: the one call that reports a severed connection
 WAIT_SLICE_S = 0.1  # the caller's waits: a signal delivered to another thread is seen within a slice
 STALL_GRACE_S = 1.0  # the caller's own stall verdict comes after the worker's flush timeout, which says more
@@ -124,7 +125,12 @@ class RerunSink:
         """Whether a job for `frame` submitted now is taken: the sink is healthy and, for a live viewer, the queue
         has room. Lets the caller skip the cost of building a frame's job that would be dropped."""
         self._frame = frame
-        return self._healthy() and (self._blocking or not self._jobs.full())
+        if not self._healthy():
+            return False
+        if self._blocking or not self._jobs.full():
+            return True
+        self.skipped += 1
+        return False
 
     def submit(self, frame: int, log: Callable[[Any], None], wait: bool = False) -> bool:
         """Hand the worker a frame's job; False when it was not taken (sink given up, or a live viewer's queue
@@ -210,7 +216,10 @@ class RerunSink:
             recording = self._open_stream()
             recording.flush(timeout_sec=self._stall_s)
         except Exception as error:  # whatever the SDK raises, the caller reports it in one line
-            self._start_error = error
+            # Without its traceback (and those it was raised from) the error holds no frame, so a stream half
+            # opened is dropped here, in the worker, never by the caller's thread: the SDK's clean-up can block.
+            error.__context__ = error.__cause__ = None
+            self._start_error = error.with_traceback(None)
             self._failure = _reason(error, self._stall_s)
             self._busy_since = None
             self._started.set()

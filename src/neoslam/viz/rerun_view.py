@@ -29,8 +29,6 @@ dropped with one warning and the run goes on; without a display, a bare `--rerun
 
 from __future__ import annotations
 
-import os
-import shutil
 import sys
 import time
 import uuid
@@ -43,9 +41,18 @@ from typing import Any
 
 import numpy as np
 
-from neoslam.errors import ConfigError, OutputError
+from neoslam.errors import ConfigError, NeoSLAMError, OutputError
 from neoslam.io.atomic import atomic_file
 from neoslam.viz.rerun_sink import RerunSink, SinkStartError
+from neoslam.viz.rerun_target import (
+    SPAWN,
+    check_rerun_target,
+    has_display,
+    import_rerun,
+    recording_target,
+    start_viewer,
+    viewer_url,
+)
 
 __all__ = [
     "SPAWN",
@@ -58,8 +65,6 @@ __all__ = [
     "stderr_warning",
 ]
 
-SPAWN = "spawn"  # the --rerun value that spawns the viewer instead of recording to a file
-INSTALL_HINT = 'pip install "neoslam[viewer]"'
 APPLICATION_ID = "neoslam"
 MAP_EVERY_FRAMES = 10
 JPEG_QUALITY = 80  # a grey KITTI frame: ~450 kB raw, ~40 kB as JPEG
@@ -68,64 +73,6 @@ HEADING_ARROW_M = 3.0
 EPOCH_STAMP_S = 1e9
 CLASS_COLOURS = {"car": (66, 133, 244), "truck": (251, 140, 0), "bicycle": (67, 160, 71), "person": (229, 57, 53)}
 OTHER_COLOUR = (158, 158, 158)
-VIEWER_EXECUTABLE = "rerun"  # the viewer rerun-sdk's spawn() starts, looked up on PATH
-# The variables a Linux (or BSD) desktop sets; the viewer's window library (winit) looks for the same three.
-DISPLAY_VARIABLES = ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET")
-ALWAYS_A_DISPLAY = ("darwin", "win32", "cygwin")  # sys.platform values whose desktop needs no variable
-SDK_LOG_FILTER = "off"  # RUST_LOG while the SDK loads: its own stderr lines about a lost sink are replaced by ours
-
-
-def import_rerun() -> Any:
-    """The rerun module, or one line saying how to install it. The SDK reads RUST_LOG once, as it loads, and by
-    default prints several lines of its own (warnings, errors) when its sink fails; the view reports that in one
-    line instead, so the SDK loads with its log off unless the user set RUST_LOG. The variable is restored at once,
-    so that a viewer spawned later logs as the user asked."""
-    loaded = sys.modules.get("rerun")
-    if loaded is not None:
-        return loaded
-    quiet = "RUST_LOG" not in os.environ
-    if quiet:
-        os.environ["RUST_LOG"] = SDK_LOG_FILTER
-    try:
-        import rerun
-    except ImportError:
-        raise ConfigError(f"--rerun needs the Rerun viewer, an optional extra: {INSTALL_HINT}") from None
-    finally:
-        if quiet:
-            os.environ.pop("RUST_LOG", None)
-    return rerun
-
-
-def has_display(environ: Any = os.environ, platform: str = sys.platform) -> bool:
-    """Whether a window can be opened: always on macOS and Windows; elsewhere (X11, Wayland) when the desktop's
-    variables are set."""
-    return platform in ALWAYS_A_DISPLAY or any(environ.get(name) for name in DISPLAY_VARIABLES)
-
-
-def check_rerun_target(target: str | None) -> None:
-    """Before any work: the --rerun value is SPAWN or a file ending .rrd, a spawned viewer has a display to open
-    its window on and its executable on PATH, and Rerun is installed."""
-    if target is None:
-        return
-    if target != SPAWN and not target.endswith(".rrd"):
-        raise ConfigError(f"--rerun takes no value (spawn the viewer) or a file ending .rrd, not {target!r}")
-    if target == SPAWN and not has_display():
-        raise ConfigError(
-            "--rerun: no display to open the Rerun viewer on (neither DISPLAY nor WAYLAND_DISPLAY is set); "
-            "record to a file with --rerun FILE.rrd and open it where there is one (rerun FILE.rrd)"
-        )
-    import_rerun()
-    if target == SPAWN and shutil.which(VIEWER_EXECUTABLE) is None:
-        raise _viewer_missing()
-
-
-def recording_target(target: str | None, out: Path, staging: Path) -> str | None:
-    """Where the recording is written: a file inside the results folder goes into its staging folder (the folder
-    appears whole, with the recording, when the run is done); any other target is kept."""
-    if target is None or target == SPAWN:
-        return target
-    path, folder = Path(target).resolve(), out.resolve()
-    return str(staging / path.relative_to(folder)) if folder in path.parents else target
 
 
 def stderr_warning(line: str) -> None:
@@ -240,10 +187,10 @@ class RerunView:
             boxes=np.array([o.box_left for o in observations], dtype=np.float64).reshape(-1, 4),
             box_labels=[o.label for o in observations],
             box_texts=[f"{o.label} {o.score:.2f}" for o in observations],
-            position=np.array(pose[:3, 3], dtype=np.float64),
+            position=np.array(pose[:3, 3]),
             heading=pose[:3, 0] * HEADING_ARROW_M,
             map=map_view,
-            head_direction=np.array(slam.head_direction.activity, dtype=np.float64),
+            head_direction=np.array(slam.head_direction.activity),  # a copy, of the same dtype
             grid_slice=np.array(grid[:, :, slam.grid_cells.peak[2]]),
             metrics=values,
         )
@@ -351,7 +298,11 @@ def rerun_session(
         def viewer_lost(frame: int | None, reason: str) -> None:
             warn(f"the Rerun viewer went away{_at(frame)} ({reason}); the run goes on without it")
 
-        with _viewing(_open_viewer, dataset, viewer_lost, blocking=False) as view:
+        def refused(reason: str) -> ConfigError:
+            return ConfigError(f"--rerun: the Rerun viewer did not start ({reason}); record to a file with --rerun "
+                               "FILE.rrd")  # fmt: skip
+
+        with _viewing(_open_viewer, dataset, viewer_lost, refused, blocking=False) as view:
             yield view
         return
     path = Path(target)
@@ -360,8 +311,11 @@ def rerun_session(
         warn(f"the Rerun recording {path} failed{_at(frame)} ({reason}); the run goes on without it, {path} is "
              "not written")  # fmt: skip
 
+    def unwritable(reason: str) -> OutputError:
+        return OutputError(f"{path}: the Rerun recording could not be started ({reason})")
+
     with suppress(_RecordingLost), atomic_file(path, overwrite, inputs) as staging:
-        with _viewing(partial(_open_file, staging), dataset, file_lost, blocking=True) as view:
+        with _viewing(partial(_open_file, staging), dataset, file_lost, unwritable, blocking=True) as view:
             yield view
         if view.sink.lost:
             raise _RecordingLost
@@ -373,18 +327,19 @@ def _at(frame: int | None) -> str:
 
 @contextmanager
 def _viewing(
-    open_stream: Callable[[], Any], dataset: Any, on_lost: Callable[[int | None, str], None], blocking: bool
+    open_stream: Callable[[], Any],
+    dataset: Any,
+    on_lost: Callable[[int | None, str], None],
+    refused: Callable[[str], NeoSLAMError],
+    blocking: bool,
 ) -> Iterator[RerunView]:
-    """The view over a sink that is open and answering; after the body, the final map and the sink's close."""
+    """The view over a sink that is open and answering (else `refused(reason)` is raised, before the run); after
+    the body, the final map and the sink's close."""
     sink = RerunSink(open_stream, on_lost, blocking)
     try:
         sink.start()
     except SinkStartError as error:
-        if blocking:
-            raise OutputError(f"--rerun: the recording could not be written ({error})") from None
-        raise ConfigError(
-            f"--rerun: the Rerun viewer did not start ({error}); record to a file with --rerun FILE.rrd"
-        ) from None
+        raise refused(str(error)) from None
     view = RerunView(sink, _left_images(dataset))
     try:
         yield view
@@ -396,10 +351,11 @@ def _viewing(
 
 
 def _open_viewer() -> Any:
-    """A recording stream sent to a spawned viewer (or to one already listening on Rerun's port)."""
+    """A recording stream sent to a viewer started for it (or to one already listening on Rerun's port)."""
     rr = import_rerun()
+    start_viewer()
     recording = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
-    _spawn_viewer(recording)
+    recording.connect_grpc(viewer_url())
     recording.log("world", rr.ViewCoordinates.FLU, static=True)  # REP-103, as NeoSLAM's robot frame
     return recording
 
@@ -410,21 +366,3 @@ def _open_file(path: Path) -> Any:
     recording.save(path)
     recording.log("world", rr.ViewCoordinates.FLU, static=True)
     return recording
-
-
-def _spawn_viewer(recording: Any) -> None:
-    """Start the Rerun viewer; one line saying how to get it when its executable is not on PATH."""
-    try:
-        recording.spawn()
-    except RuntimeError as error:
-        if "executable" not in str(error):
-            raise
-        raise _viewer_missing() from None
-
-
-def _viewer_missing() -> ConfigError:
-    return ConfigError(
-        f"--rerun: the Rerun viewer (`{VIEWER_EXECUTABLE}`) is not on PATH; the viewer extra installs it into the "
-        'environment (pip install "neoslam[viewer]", then run with that environment\'s bin folder on PATH), or '
-        "record to a file with --rerun FILE.rrd"
-    )

@@ -1,0 +1,62 @@
+"""What the command modules share: printing a line, failing with one line and exit code 2, a table of results,
+and the options several commands take."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from neoslam.errors import NeoSLAMError
+
+__all__ = [
+    "CalibrationOption",
+    "ConfigOption",
+    "GoalOption",
+    "LeftTopicOption",
+    "OutOption",
+    "OverwriteOption",
+    "QuietOption",
+    "RightTopicOption",
+    "StaleOption",
+    "fail",
+    "say",
+    "table",
+]
+
+ConfigOption = Annotated[Path | None, typer.Option("--config", "-c", help="YAML file overriding the defaults.")]
+OutOption = Annotated[Path, typer.Option("--out", "-o", help="Output folder (written whole or not at all).")]
+OverwriteOption = Annotated[bool, typer.Option("--overwrite", help="Replace a non-empty output folder.")]
+QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")]
+LeftTopicOption = Annotated[
+    str | None, typer.Option(help="A bag's left camera topic (Image or CompressedImage); found when unambiguous.")
+]
+RightTopicOption = Annotated[str | None, typer.Option(help="A bag's right camera topic; found when unambiguous.")]
+GoalOption = Annotated[
+    str | None,
+    typer.Option(help='Guide the run to a goal on the map ("truck", "start", ...: docs/navigation.md); guidance.csv.'),
+]
+StaleOption = Annotated[bool, typer.Option("--stale", help="A stale object may be the --goal.")]
+CalibrationOption = Annotated[
+    Path | None, typer.Option(metavar="FILE", help="Image folder's calibration (default: its calibration.yaml).")
+]
+
+
+def say(text: object, err: bool = False, nl: bool = True) -> None:
+    """Print a line; a file name that is not UTF-8 (kept by Python as surrogate escapes) is shown with its bytes
+    escaped (seq\\xff), where printing it as it is would fail."""
+    readable = str(text).encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    typer.echo(readable, err=err, nl=nl)
+
+
+def fail(error: NeoSLAMError | OSError) -> None:
+    # OSError: a folder that cannot be written, a disk that is full; the user can fix these too.
+    message = f"{error.filename}: {error.strerror}" if isinstance(error, OSError) and error.filename else error
+    say(f"neoslam: error: {message}", err=True)
+    raise typer.Exit(code=2)
+
+
+def table(rows: list[tuple[str, Any]]) -> str:
+    width = max(len(name) for name, _ in rows)
+    return "\n".join(f"{name:<{width}}  {value}" for name, value in rows)
