@@ -73,6 +73,7 @@ class Delivery:
     planned: int | None
     resolved: tuple[int, ...] | None  # what the goal resolved to (an object goal: the map object's id)
     resolved_kind: str | None
+    resolved_target: np.ndarray | None  # (3,) what it resolved to, map frame (an object: the map's position of it)
     frame_ms: list[float]
     limit: int
 
@@ -94,7 +95,7 @@ def _goal(kind: str, mapped: MappedDrive, rng: np.random.Generator) -> tuple[str
         point = mapped.streets.positions[int(rng.integers(len(mapped.streets)))]
         x, y, _ = mapped.to_map(point)
         return f"{x:.2f},{y:.2f}", point, -1
-    return "start", mapped.experience_truth[0], -1
+    return "start of session 1", mapped.experience_truth[0], -1  # "start" alone: the delivery session's own
 
 
 def _start(mapped: MappedDrive, target: np.ndarray | None, rng: np.random.Generator) -> tuple[int, int]:
@@ -220,6 +221,7 @@ def run_delivery(mapped: MappedDrive, plan: DeliveryPlan) -> Delivery:
         planned=guidance.events.planned,
         resolved=None if route is None else route.goal.ids,
         resolved_kind=None if route is None else route.goal.kind,
+        resolved_target=None if route is None else np.array(route.goal.target, dtype=float),
         frame_ms=frame_ms,
         limit=limit,
     )

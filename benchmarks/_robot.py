@@ -9,7 +9,8 @@ The controller (`choose_next`) reads only the guidance of the last frame: before
 (drives on along the street; where the street forks, a seeded choice, never back where it came from unless it is a
 dead end); once a route is planned it takes the edge whose direction, in the world, best matches the guidance's
 bearing to the next waypoint turned into the world by the robot's true heading (the bearing is in the robot's frame:
-no map knowledge is needed to follow it). `arrived`, `missing` and `unreachable` stop the robot.
+no map knowledge is needed to follow it), and turns round only for a waypoint nearly behind it. `arrived`, `missing`
+and `unreachable` stop the robot.
 """
 
 from __future__ import annotations
@@ -22,10 +23,21 @@ from scipy.spatial.transform import Rotation
 
 from benchmarks._street_graph import StreetGraph
 
-__all__ = ["FOLLOWING", "MAX_YAW_RATE", "SNAP_TURN_RAD", "STOPPING", "Robot", "choose_next", "explore", "follow"]
+__all__ = [
+    "FOLLOWING",
+    "MAX_YAW_RATE",
+    "SNAP_TURN_RAD",
+    "STOPPING",
+    "U_TURN_CONE_RAD",
+    "Robot",
+    "choose_next",
+    "explore",
+    "follow",
+]
 
 SNAP_TURN_RAD = np.radians(25.0)  # a turn at a node up to this is taken while driving (a street's curve)
 MAX_YAW_RATE = np.radians(90.0)  # rad/s of a turn in place (a U-turn takes two seconds)
+U_TURN_CONE_RAD = np.radians(60.0)  # the robot turns round only for a waypoint this close to straight behind it
 STOPPING = frozenset({"arrived", "missing", "unreachable"})  # the guidance states that end a delivery
 FOLLOWING = frozenset({"on_route", "replanned", "off_route"})  # the states with a bearing to follow
 
@@ -109,11 +121,18 @@ class Robot:
             self.yaw = _wrap(self.yaw + np.sign(turn) * largest)
 
 
-def follow(graph: StreetGraph, node: int, direction: float) -> int:
-    """The neighbour of `node` whose edge points nearest to `direction` (world yaw, rad); ties: the lowest id."""
-    neighbours = graph.neighbours[node]
+def follow(graph: StreetGraph, node: int, came_from: int, direction: float) -> int:
+    """The neighbour of `node` whose edge points nearest to `direction` (world yaw, rad; ties: the lowest id), going
+    back where it came from only when `direction` points back within U_TURN_CONE_RAD: a waypoint off to the side of
+    a street with no turn here is reached by driving on to the turn, not by turning round."""
+    neighbours = [int(n) for n in graph.neighbours[node]]
     gaps = [abs(_wrap(graph.heading(node, n) - direction)) for n in neighbours]
-    return int(neighbours[int(np.argmin(gaps))])
+    best = neighbours[int(np.argmin(gaps))]
+    onward = [(gap, n) for gap, n in zip(gaps, neighbours, strict=True) if n != came_from]
+    if best != came_from or not onward:
+        return best
+    back = abs(_wrap(graph.heading(node, came_from) - direction))
+    return best if back <= U_TURN_CONE_RAD else min(onward)[1]
 
 
 def explore(graph: StreetGraph, node: int, came_from: int, rng: np.random.Generator) -> int:
@@ -130,5 +149,5 @@ def choose_next(
     """The controller's choice at a node, from the last guidance's state and bearing (robot frame, rad) and the
     robot's true heading: follow the bearing on a route, explore otherwise."""
     if state in FOLLOWING and bearing is not None:
-        return follow(graph, node, yaw + bearing)
+        return follow(graph, node, came_from, yaw + bearing)
     return explore(graph, node, came_from, rng)

@@ -5,26 +5,42 @@ benchmark reads it, never the SLAM path.
 The drive's true trajectory is resampled every SPACING_M of travel. Each sample becomes a node, unless a node made
 at least REVISIT_GAP_M of travel earlier lies within MERGE_RADIUS_M of it in the ground plane: the drive is passing a
 street it drove before (in either direction, or across it at a junction), and the sample takes that node. Consecutive
-samples' nodes are joined both ways, so a robot can turn onto any street the drive used, in either direction. An
-edge weighs its length in the ground plane; shortest paths are Dijkstra's (scipy).
+samples' nodes are joined both ways, so a robot can turn onto any street the drive used, in either direction.
+Where the drive took a corner on a curve and later drove straight through the junction (or two passes run in lanes
+farther apart than MERGE_RADIUS_M), nodes within JUNCTION_RADIUS_M of each other can be far apart along the edges: a
+junction edge joins two such nodes when the way round is more than DETOUR_FACTOR times the straight line, nearest
+pairs first, so that a robot can turn there as on a street. An edge weighs its length in the ground plane; shortest
+paths are Dijkstra's (scipy).
 """
 
 from __future__ import annotations
 
+import heapq
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-__all__ = ["MERGE_RADIUS_M", "REVISIT_GAP_M", "SPACING_M", "StreetGraph", "street_graph"]
+__all__ = [
+    "DETOUR_FACTOR",
+    "JUNCTION_RADIUS_M",
+    "MERGE_RADIUS_M",
+    "REVISIT_GAP_M",
+    "SPACING_M",
+    "StreetGraph",
+    "street_graph",
+]
 
 SPACING_M = 1.5  # a node every this much travel
 # A sample this close to an earlier pass's node is on the same street (KITTI 00 and 05 drive a revisited street
 # within a metre of the first pass, and a crossing within one sample spacing).
 MERGE_RADIUS_M = 3.0
 REVISIT_GAP_M = 30.0  # an earlier pass: a node made at least this much travel before (not the drive's own last ones)
+JUNCTION_RADIUS_M = 5.0  # nodes this close may be joined by a junction edge (a corner's curve is within 5 m of it)
+DETOUR_FACTOR = 3.0  # ... when the way round along the edges is longer than this many times the straight line
 _MIN_EDGE_M = 1e-3  # an edge shorter than this still counts (a zero would be no edge to scipy)
 
 
@@ -39,7 +55,7 @@ class StreetGraph:
     def __len__(self) -> int:
         return len(self.positions)
 
-    @property
+    @cached_property
     def matrix(self) -> csr_matrix:
         """The edges both ways, weighted by ground-plane length."""
         a, b = self.edges[:, 0], self.edges[:, 1]
@@ -62,9 +78,17 @@ class StreetGraph:
             path.append(previous)
         return np.asarray(path[::-1], dtype=int)
 
+    @cached_property
+    def tree(self) -> cKDTree:
+        return cKDTree(self.positions[:, :2])
+
     def nearest(self, point: np.ndarray) -> int:
         """The node nearest to a point in the ground plane."""
-        return int(cKDTree(self.positions[:, :2]).query(np.asarray(point, dtype=float)[:2])[1])
+        return int(self.tree.query(np.asarray(point, dtype=float)[:2])[1])
+
+    def nearest_nodes(self, points: np.ndarray) -> np.ndarray:
+        """(k,) the node nearest to each of (k, 2+) points in the ground plane."""
+        return np.asarray(self.tree.query(np.asarray(points, dtype=float).reshape(-1, points.shape[-1])[:, :2])[1])
 
     def heading(self, source: int, target: int) -> float:
         """Yaw of the edge source -> target in the world frame, rad."""
@@ -105,8 +129,10 @@ def street_graph(
         if previous >= 0 and node != previous:
             edges.add((min(previous, node), max(previous, node)))
         previous = node
+    positions = nodes[:count].copy()
+    edges |= _junction_edges(positions, edges, JUNCTION_RADIUS_M, DETOUR_FACTOR)
     pairs = np.array(sorted(edges), dtype=int).reshape(-1, 2)
-    return StreetGraph(nodes[:count].copy(), pairs, _neighbours(count, pairs))
+    return StreetGraph(positions, pairs, _neighbours(count, pairs))
 
 
 def _earlier_node(
@@ -119,6 +145,47 @@ def _earlier_node(
     distances = np.linalg.norm(nodes[earlier, :2] - point[:2], axis=1)
     best = int(np.argmin(distances))
     return int(earlier[best]) if distances[best] <= radius else -1
+
+
+def _junction_edges(
+    positions: np.ndarray, edges: set[tuple[int, int]], radius: float, detour: float
+) -> set[tuple[int, int]]:
+    """Edges between nodes within `radius` whose way round along the edges (those given and those added before,
+    nearest pairs first) is more than `detour` times their straight distance."""
+    adjacency: dict[int, dict[int, float]] = {i: {} for i in range(len(positions))}
+
+    def join(a: int, b: int) -> None:
+        length = max(float(np.hypot(*(positions[a, :2] - positions[b, :2]))), _MIN_EDGE_M)
+        adjacency[a][b] = adjacency[b][a] = length
+
+    for a, b in edges:
+        join(a, b)
+    pairs = cKDTree(positions[:, :2]).query_pairs(radius, output_type="ndarray")
+    gaps = np.linalg.norm(positions[pairs[:, 0], :2] - positions[pairs[:, 1], :2], axis=1)
+    added = set()
+    for (a, b), gap in zip(pairs[np.argsort(gaps, kind="stable")].tolist(), np.sort(gaps).tolist(), strict=True):
+        if _way_round(adjacency, a, b, detour * gap) > detour * gap:
+            join(a, b)
+            added.add((min(a, b), max(a, b)))
+    return added
+
+
+def _way_round(adjacency: dict[int, dict[int, float]], source: int, target: int, limit: float) -> float:
+    """The shortest distance along the edges from source to target, searched up to `limit` (beyond: inf)."""
+    best = {source: 0.0}
+    queue = [(0.0, source)]
+    while queue:
+        distance, node = heapq.heappop(queue)
+        if node == target:
+            return distance
+        if distance > best.get(node, np.inf):
+            continue
+        for neighbour, length in adjacency[node].items():
+            through = distance + length
+            if through <= limit and through < best.get(neighbour, np.inf):
+                best[neighbour] = through
+                heapq.heappush(queue, (through, neighbour))
+    return np.inf
 
 
 def _neighbours(n: int, pairs: np.ndarray) -> tuple[np.ndarray, ...]:

@@ -27,6 +27,9 @@ from collections.abc import Callable
 import numpy as np
 
 from benchmarks import harness
+from benchmarks._deliveries import GOAL_MIX, plan_deliveries
+from benchmarks._delivery_maps import MappedDrive, map_drive, map_names
+from benchmarks._judging import FAILURE_COLUMNS, SUMMARY_COLUMNS, failures, judged, summary
 from benchmarks._navigation_maps import Drive, kitti_map, load_drives
 from neoslam.config import NeoSLAMConfig
 from neoslam.geometry import make_pose
@@ -44,6 +47,10 @@ DETOUR_M, DETOUR_FRAMES = 25.0, 25  # the detour: this far off the route, over t
 ONE_SHOT_PLANS = 3  # plan_route whole, per goal kind
 GOAL_KINDS = ("experience", "point", "start", "object", "class")
 POINT_SPREAD_M = 5.0  # a point goal lies this far (at most, each axis) from an experience
+MAPS, QUICK_MAPS = ["00", "05", "town"], ["town"]  # deliveries: the drives mapped
+DELIVERIES, QUICK_DELIVERIES = 30, 2  # a map
+REMOVED, QUICK_REMOVED = 5, 1  # deliveries to a removed goal, a map
+DELIVERIES_PER_TASK = 10  # a worker's task: this many deliveries on one map (a worker takes seconds to start)
 
 
 def _percentile(values: list[float], q: float) -> float:
@@ -203,9 +210,54 @@ def run_speed(run: harness.Run) -> dict:
     }
 
 
-PARTS: dict[str, Callable[[harness.Run], dict]] = {"speed": run_speed}
+def _pooled(task: Callable, jobs: list[tuple], workers: int) -> list:
+    """task(*job) for each job: in this process with one worker, else each job in a fresh worker process."""
+    if workers <= 1:
+        return [task(*job) for job in jobs]
+    with harness.pool(workers) as pool:
+        return pool.starmap(task, jobs, chunksize=1)
+
+
+def _map_row(mapped: MappedDrive) -> dict:
+    return {
+        "map": mapped.name,
+        "frames": len(mapped.truth),
+        "experiences": len(mapped.state.experiences),
+        "goal_objects": len(mapped.object_ids),
+        "matched": int((mapped.object_match >= 0).sum()),
+        "streets_m": float(mapped.streets.matrix.sum() / 2),
+        "speed_m_s": mapped.speed,
+        "mapping_s": mapped.mapping_s,
+    }
+
+
+def run_deliveries(run: harness.Run) -> dict:
+    """Part `deliveries`: map each drive, then drive the deliveries on it by the guidance alone (see the module)."""
+    args = run.args
+    names = args.maps or (QUICK_MAPS if run.quick else MAPS)
+    count = args.deliveries if args.deliveries is not None else (QUICK_DELIVERIES if run.quick else DELIVERIES)
+    removed = args.removed if args.removed is not None else (QUICK_REMOVED if run.quick else REMOVED)
+    maps = _pooled(map_drive, [(name, args.seed) for name in names], min(args.workers, len(names)))
+    run.table("delivery_maps", [_map_row(m) for m in maps], list(_map_row(maps[0])), title="## Maps (simulated)")
+    jobs = []
+    for index, mapped in enumerate(maps):
+        plans = plan_deliveries(mapped, count, removed, args.seed, index)
+        jobs += [(mapped, plans[k : k + DELIVERIES_PER_TASK]) for k in range(0, len(plans), DELIVERIES_PER_TASK)]
+    rows = [row for rows in _pooled(judged, jobs, args.workers) for row in rows]
+    table = [summary([r for r in rows if r["map"] == m.name], m.name) for m in maps] + [summary(rows, "total")]
+    title = f"## Deliveries ({count} a map and {removed} to removed goals; simulated, vo odometry, real detection)"
+    run.table("deliveries", table, SUMMARY_COLUMNS, title=title)
+    kinds = [summary([r for r in rows if r["kind"] == kind], kind) for kind in [*GOAL_MIX, "removed"]]
+    run.table("deliveries_by_goal", kinds, ["map", *SUMMARY_COLUMNS[1:]], title="## By kind of goal (all maps)")
+    run.table("delivery_failures", failures(rows), FAILURE_COLUMNS, title="## Failures")
+    return {"maps": names, "deliveries_per_map": count, "removed_per_map": removed, "summary": table,
+            "by_goal": kinds, "rows": rows}  # fmt: skip
+
+
+PARTS: dict[str, Callable[[harness.Run], dict]] = {"speed": run_speed, "deliveries": run_deliveries}
 QUICK = f"maps of {', '.join(f'{s:,}' for s in QUICK_SIZES)} experiences, {QUICK_PLANS} plans a goal kind, "
-QUICK += f"{QUICK_GUIDED_ROUTES} guided routes"
+QUICK += f"{QUICK_GUIDED_ROUTES} guided routes; {QUICK_DELIVERIES} deliveries and {QUICK_REMOVED} to a removed goal "
+QUICK += f"on {', '.join(QUICK_MAPS)}"
 
 
 def arguments(parser: argparse.ArgumentParser) -> None:
@@ -213,10 +265,16 @@ def arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sizes", nargs="+", type=int, help=f"map sizes, experiences (default {SIZES})")
     parser.add_argument("--plans", type=int, help=f"plans a goal kind and map size (default {PLANS})")
     parser.add_argument("--seed", type=int, default=1, help="seed of the objects, goals, starts and drives")
+    parser.add_argument("--maps", nargs="+", choices=map_names(), help=f"deliveries: maps (default {MAPS})")
+    parser.add_argument("--deliveries", type=int, help=f"deliveries a map (default {DELIVERIES})")
+    parser.add_argument("--removed", type=int, help=f"deliveries to a removed goal a map (default {REMOVED})")
 
 
 def main(argv: list[str] | None = None) -> None:
     run = harness.start(__name__, __doc__, QUICK, arguments, argv, data=(("kitti", "poses"),))
+    if run.args.out is None and set(run.args.parts) != set(PARTS):  # keep the stored result of every part
+        name = "-".join([run.name, *run.args.parts])
+        run.args.out = harness.RESULTS / f"{name}{'.quick' if run.quick else ''}.json"
     figures = {part: PARTS[part](run) for part in run.args.parts}
     run.finish(figures)
 

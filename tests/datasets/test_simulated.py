@@ -9,7 +9,14 @@ import numpy as np
 import pytest
 
 from neoslam.config import SimulatorConfig
-from neoslam.datasets.simulated import FORMAT, VERSION, is_simulated_dataset, read_dataset, write_dataset
+from neoslam.datasets.simulated import (
+    FORMAT,
+    VERSION,
+    is_simulated_dataset,
+    read_dataset,
+    simulated_observations,
+    write_dataset,
+)
 from neoslam.errors import InputError
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.sim.simulator import SimulatedRecording, simulate
@@ -92,6 +99,21 @@ def test_read_back(written: Path, recording: SimulatedRecording) -> None:
             np.testing.assert_array_equal(observation.patch, detection.patch)
     assert dataset.ground_truth is not None
     np.testing.assert_allclose(dataset.ground_truth.poses, recording.truth.poses, atol=1e-6)
+
+
+def test_detections_in_memory_become_the_observations_the_reader_gives(written: Path, recording) -> None:
+    """A simulation run frame by frame (a robot in closed loop) gives its SLAM the observations a dataset folder
+    would: the same values, rounded as written, the same classes left out."""
+    classes = ("car", "person")
+    read = read_dataset(written, classes=classes)
+    for observations, detections in zip(read.observations, recording.detections, strict=True):
+        in_memory = simulated_observations(detections, classes)
+        assert len(in_memory) == len(observations)
+        for mine, theirs in zip(in_memory, observations, strict=True):
+            assert mine.label == theirs.label and mine.score == theirs.score
+            for field in ("box_left", "box_right", "center_camera", "patch"):
+                np.testing.assert_array_equal(getattr(mine, field), getattr(theirs, field))
+    assert sum(map(len, recording.detections)) > sum(map(len, read.observations)) > 0
 
 
 def test_frames_are_what_the_slam_path_sees(written: Path) -> None:

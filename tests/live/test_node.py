@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tests.conftest import require_extra
 
 from neoslam.datasets.kitti import read_kitti_sequence
 from neoslam.datasets.kitti_writer import write_kitti_sequence
@@ -293,8 +294,9 @@ def test_the_node_guides_to_a_goal_on_a_stored_map(kitti_06_51: Path, domain_id:
     cli.ok("run", kitti_06_51, "--sequence", "06", "--map", map_file, "--out", tmp_path / "offline", "--quiet")
     before = map_file.read_bytes()
     results = tmp_path / "live"
+    rerun = require_extra("rerun", "viewer")
     node = _neoslam("ros2", "--map", map_file, "--localise-only", "--goal", "start of session 1", "--out", results,
-                    "--domain-id", domain_id, "--idle-exit", 3)  # fmt: skip
+                    "--rerun", results / "live.rrd", "--domain-id", domain_id, "--idle-exit", 3)  # fmt: skip
     _finish(
         _neoslam("ros2-play", kitti_06_51, "--sequence", "06", "--rate", 5, "--wait", 120, "--domain-id", domain_id)
     )
@@ -309,3 +311,5 @@ def test_the_node_guides_to_a_goal_on_a_stored_map(kitti_06_51: Path, domain_id:
     if guidance["localised_frame"] is not None:  # the session relocalised in the map: a route, then guidance on it
         assert guidance["planned_frame"] is not None and "unreachable" not in states
         assert set(states) & {"on_route", "replanned", "arrived"}
+    shown = {chunk.entity_path.lstrip("/") for chunk in rerun.chunk.RrdReader(results / "live.rrd").stream()}
+    assert {"world/robot", "world/trajectory/corrected", "guidance/state"} <= shown

@@ -78,6 +78,23 @@ def test_parts_of_the_map_never_linked_have_no_route_between_them():
     assert route.length_m == pytest.approx(100.0)
 
 
+def test_a_position_on_experiences_not_linked_yet_starts_at_the_map_beside_it():
+    """A robot just relocalised is in the map's frame, but its own newest experiences are not linked to the map yet:
+    a route from its position starts at the nearest experience beside it that reaches the goal."""
+    streets = ladder()
+    own = streets.builder.drive([(148, 2), (152, 2)], session=2, after=None)  # in the map's frame, not linked
+    state = streets.builder.state()
+    robot = state.experience_poses[own[-1]]
+    planner = RoutePlanner(state)
+    assert planner.start_of(robot) == own[-1]
+    route = planner.plan("experience 0", start=robot)
+    assert route.start == streets.at(150, 0) and route.experiences[-1] == 0
+    assert planner.plan(f"experience {own[0]}", start=robot).start == own[-1]  # its own part reaches its own
+    streets.builder.drive([(1000, 0), (1010, 0)], session=3)  # another part, with no map beside it
+    with pytest.raises(NoRouteError, match="no route from experience"):
+        RoutePlanner(streets.builder.state()).plan("experience 0", start=np.array([1000.0, 0.0, 0.0]))
+
+
 def test_a_route_to_where_the_robot_is_is_one_waypoint():
     route = plan_route(ladder().state, "experience 12", start=12)
     assert len(route) == 1 and route.length_m == 0.0 and route.expected_time_s == 0.0

@@ -11,7 +11,7 @@ from neoslam.config import NOISE_PROFILES, SimulatorConfig
 from neoslam.datasets.simulated import read_dataset, write_dataset
 from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
 from neoslam.geometry import body_velocities, integrate_body_velocities, relative_pose
-from neoslam.sim.odometry import noisy_odometry
+from neoslam.sim.odometry import noisy_odometry, noisy_step
 from neoslam.sim.routes import ROUTES, drive_route
 from neoslam.sim.simulator import SimulatedRecording, simulate_route
 from neoslam.types import Trajectory
@@ -44,6 +44,20 @@ def test_none_is_the_truth_through_the_dataset_files(tmp_path: Path, truth: Traj
     write_dataset(tmp_path / "d", recording)
     odometry = read_dataset(tmp_path / "d").odometry()  # starts at identity: the robot knows no world frame
     np.testing.assert_allclose(odometry.poses, relative_pose(truth.poses[0], truth.poses), atol=1e-6)
+
+
+@pytest.mark.parametrize("profile", ["vo", "heavy"])
+def test_a_step_at_a_time_has_the_noise_model_of_a_whole_trajectory(truth: Trajectory, profile: str) -> None:
+    """A robot driven in closed loop gets its odometry a step at a time: the same noise model, the same draws as a
+    trajectory of those two poses."""
+    noise = NOISE_PROFILES[profile]
+    for i in (1, 100, len(truth) - 1):
+        pair = truth.subset(np.array([i - 1, i]))
+        linear, angular = noisy_odometry(pair, noise, np.random.default_rng(i))
+        dt = float(pair.timestamps[1] - pair.timestamps[0])
+        step = noisy_step(pair.poses[0], pair.poses[1], dt, noise, np.random.default_rng(i))
+        np.testing.assert_allclose(step[0], linear[1], atol=1e-9)
+        np.testing.assert_allclose(step[1], angular[1], atol=1e-9)
 
 
 def test_velocities_start_with_zero(truth: Trajectory) -> None:

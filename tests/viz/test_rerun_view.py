@@ -211,3 +211,14 @@ def test_without_the_viewer_extra_rerun_says_how_to_install_it(cli, tmp_path: Pa
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and 'pip install "neoslam[viewer]"' in lines[0]
     assert not (tmp_path / "out").exists() and not (tmp_path / "run.rrd").exists()
+
+
+@pytest.mark.slow
+def test_a_goals_guidance_is_shown_with_the_route(cli, rerun_module, tmp_path: Path) -> None:
+    data = _simulate(cli, tmp_path, BLOCK_FRAMES)
+    cli.ok("run", data, "--goal", "start", "--rerun", tmp_path / "guided.rrd", "--out", tmp_path / "out", "-q")
+    recording = Recording(tmp_path / "guided.rrd")
+    for entity in ("world/route", "world/waypoint", "guidance/state"):
+        assert recording.rows[entity] >= 1, entity
+    assert recording.rows["world/waypoint"] == BLOCK_FRAMES  # the first session is in the map's frame throughout
+    assert recording.rows["guidance/remaining_m"] == BLOCK_FRAMES

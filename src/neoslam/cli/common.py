@@ -18,6 +18,7 @@ __all__ = [
     "OutOption",
     "OverwriteOption",
     "QuietOption",
+    "RerunOption",
     "RightTopicOption",
     "StaleOption",
     "fail",
@@ -40,6 +41,18 @@ GoalOption = Annotated[
 StaleOption = Annotated[bool, typer.Option("--stale", help="A stale object may be the --goal.")]
 CalibrationOption = Annotated[
     Path | None, typer.Option(metavar="FILE", help="Image folder's calibration (default: its calibration.yaml).")
+]
+
+
+RerunOption = Annotated[
+    str | None,
+    typer.Option(
+        "--rerun",
+        metavar="[FILE.rrd]",
+        # The backslash keeps rich from reading [viewer] as markup.
+        help="Show the run live in Rerun: alone, spawn the viewer; with FILE.rrd, record there "
+        '(needs pip install "neoslam\\[viewer]").',
+    ),
 ]
 
 

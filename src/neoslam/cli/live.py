@@ -15,6 +15,7 @@ from neoslam.cli.common import (
     GoalOption,
     LeftTopicOption,
     OverwriteOption,
+    RerunOption,
     RightTopicOption,
     StaleOption,
     fail,
@@ -45,6 +46,7 @@ def ros2_command(
     ] = False,
     goal: GoalOption = None,
     stale: StaleOption = False,
+    rerun: RerunOption = None,
     domain: DomainOption = None,
     frames: Annotated[int | None, typer.Option(min=1, help="Stop after mapping this many frames.")] = None,
     idle_exit: Annotated[
@@ -82,6 +84,7 @@ def ros2_command(
             inform,
             goal,
             stale,
+            rerun,
         )
     except (NeoSLAMError, OSError) as error:
         fail(error)

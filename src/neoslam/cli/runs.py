@@ -7,7 +7,7 @@ from typing import Annotated, Any
 
 import typer
 
-from neoslam.cli.app import RERUN_OPTION, app
+from neoslam.cli.app import app
 from neoslam.cli.common import (
     CalibrationOption,
     ConfigOption,
@@ -16,6 +16,7 @@ from neoslam.cli.common import (
     OutOption,
     OverwriteOption,
     QuietOption,
+    RerunOption,
     RightTopicOption,
     StaleOption,
     fail,
@@ -84,16 +85,7 @@ def run_command(
         str | None, typer.Option(help="A bag's nav_msgs/Odometry topic as the motion instead of stereo odometry.")
     ] = None,
     backend: Annotated[str | None, typer.Option(help="Map correction: relaxation or pose-graph.")] = None,
-    rerun: Annotated[
-        str | None,
-        typer.Option(
-            RERUN_OPTION,
-            metavar="[FILE.rrd]",
-            # The backslash keeps rich from reading [viewer] as markup.
-            help="Show the run live in Rerun: alone, spawn the viewer; with FILE.rrd, record there "
-            '(needs pip install "neoslam\\[viewer]").',
-        ),
-    ] = None,
+    rerun: RerunOption = None,
     map_path: Annotated[
         Path | None,
         typer.Option(

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from neoslam import stopping
-from neoslam.commands.run import write_results
+from neoslam.commands.run import observers, write_results
 from neoslam.commands.run_metrics import run_metrics
 from neoslam.config import NeoSLAMConfig
 from neoslam.datasets.opening import ImageInputs, open_stereo_sequence
@@ -19,6 +19,7 @@ from neoslam.errors import ConfigError
 from neoslam.io.atomic import atomic_directory, check_target
 from neoslam.io.route_files import write_guidance_csv
 from neoslam.store.recording import check_map_path, map_recording
+from neoslam.viz.rerun_view import check_rerun_target, recording_target, rerun_session
 
 __all__ = ["INSTALL_HINT", "domain_id", "run_node", "play", "record", "live_metrics"]
 
@@ -88,16 +89,18 @@ def run_node(
     inform: Callable[[str], None] | None = None,
     goal: str | None = None,
     stale_goal: bool = False,
+    rerun: str | None = None,
 ) -> dict[str, Any]:
     """Run the live node until Ctrl-C or SIGTERM (or `max_frames`, or `idle_exit_s` without images), then commit
     the map and write the results folder `out` (if given). `goal`: guide to it (see `neoslam run --goal`).
-    Returns the session's metrics."""
+    `rerun`: show the session in Rerun (see `neoslam run --rerun`). Returns the session's metrics."""
     _import_live()
     from neoslam.live.node import LiveNode
     from neoslam.navigation.session import GoalGuidance
 
     guidance = GoalGuidance(goal, config, stale_goal) if goal is not None else None
 
+    check_rerun_target(rerun)
     if out is not None:
         check_target(out, overwrite, list(read))
     if map_path is not None:
@@ -111,8 +114,12 @@ def run_node(
         session = stack.enter_context(map_recording(map_path, config, localise_only)) if map_path else None
         stored = session.stored if session is not None else None
         recorder = session.recorder if session is not None else None
+        view = stack.enter_context(rerun_session(_rerun_target(rerun, out, staging), None, overwrite, list(read)))
+        if view is not None and guidance is not None:
+            view.follow(guidance)
         finish = recorder.finish if recorder is not None else None
-        node = LiveNode(config, domain, stored, session_name, recorder, warn, inform, finish, guidance)
+        on_step = observers(recorder, view)
+        node = LiveNode(config, domain, stored, session_name, on_step, warn, inform, finish, guidance)
         live_run = node.run(stop, max_frames, idle_exit_s)
         metrics = live_metrics(live_run, config, session_name)
         if state.signum is not None:
@@ -125,6 +132,13 @@ def run_node(
             # no plots: they take seconds, and a stopped node has less than one to write its results
             write_results(staging, _Named(session_name, live_run), live_run.result, config, metrics, session, False)
     return metrics
+
+
+def _rerun_target(rerun: str | None, out: Path | None, staging: Path | None) -> str | None:
+    """Where the view goes: a recording inside the results folder is written into its staging folder."""
+    if out is None or staging is None:
+        return rerun
+    return recording_target(rerun, out, staging)
 
 
 class _Named:

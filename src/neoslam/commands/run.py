@@ -33,7 +33,7 @@ from neoslam.store.recording import MapRecording, check_map_path, map_recording
 from neoslam.viz.rerun_view import check_rerun_target, recording_target, rerun_session
 from neoslam.viz.run_plots import write_plots
 
-__all__ = ["run_dataset", "with_backend", "write_results"]
+__all__ = ["observers", "run_dataset", "with_backend", "write_results"]
 
 
 def with_backend(config: NeoSLAMConfig, backend: str | None) -> NeoSLAMConfig:
@@ -45,7 +45,7 @@ def with_backend(config: NeoSLAMConfig, backend: str | None) -> NeoSLAMConfig:
     return config.model_copy(update={"experience_map": config.experience_map.model_copy(update={"backend": backend})})
 
 
-def _observers(*observers):
+def observers(*observers):
     """One step observer calling each given one in turn (None ones left out)."""
     chosen = [observer for observer in observers if observer is not None]
     if not chosen:
@@ -93,6 +93,8 @@ def run_dataset(
         viewer = recording_target(rerun, out, staging)
         kept = map_recording(map_path, config, localise_only) if map_path is not None else nullcontext(None)
         with kept as session, rerun_session(viewer, dataset, overwrite, [data, *inputs.files(), *read]) as on_step:
+            if on_step is not None and guidance is not None:
+                on_step.follow(guidance)
             stored = session.stored if session is not None else None
             recorder = session.recorder if session is not None else None
             start = time.perf_counter()
@@ -101,7 +103,7 @@ def run_dataset(
                 config,
                 total=len(dataset),
                 progress=progress,
-                on_step=_observers(on_step, recorder, guidance),
+                on_step=observers(guidance, on_step, recorder),  # the guidance first: the view shows it
                 stored=stored,
                 session_name=dataset.name,
             )

@@ -231,10 +231,10 @@ class LiveNode:
         track.latencies_s.append(time.monotonic() - pair.received_s)
         track.stamps_ns.append(pair.stamp_ns)
         track.odometry.append(frame.odometry_pose)
+        if self.guidance is not None:  # before the other observers: a view shows the frame's guidance
+            self._guide(slam, frame, pose, outputs, pair.stamp_ns)
         if self.on_step is not None:
             self.on_step(slam, frame, pose)
-        if self.guidance is not None:
-            self._guide(slam, frame, pose, outputs, pair.stamp_ns)
         if len(track.stamps_ns) == 1 and self.inform is not None:
             self.inform(self._first_frame_line(pair.stamp_ns))
         self._publish_events(slam, outputs, shown, pair.stamp_ns)

@@ -104,14 +104,44 @@ class RoutePlanner:
 
     def plan(self, goal: Goal | str, start: Start = None, stale: bool = False) -> Route:
         """The shortest route from `start` to `goal` (text of the goal language or a typed goal) on the map as it is
-        (a running NeoSLAM's read again first); `stale` allows a stale object as the goal. GoalError (NoRouteError
-        when no route reaches it) naming the goal otherwise."""
+        (a running NeoSLAM's read again first); `stale` allows a stale object as the goal. A position start whose
+        nearest experience lies in a part of the map with no route to the goal starts at the nearest experience of
+        another part within `off_route_distance` that has one (see _starts). GoalError (NoRouteError when no route
+        reaches it) naming the goal otherwise."""
         goal = parse_goal(goal) if isinstance(goal, str) else goal
         if isinstance(self.source, NeoSLAM):
             self.refresh()
         self._require_experiences()
-        paths = self.graph.shortest_paths(self.start_of(start))
+        *others, last = self._starts(start)
+        for begin in others:
+            try:
+                return self._planned(goal, begin, stale)
+            except NoRouteError:
+                continue  # the goal lies in another part of the map: try the next part beside the start
+        return self._planned(goal, last, stale)
+
+    def _planned(self, goal: Goal, start: int, stale: bool) -> Route:
+        paths = self.graph.shortest_paths(start)
         return self._route(paths, self.goals.resolve(goal, paths, stale))
+
+    def _starts(self, start: Start) -> list[int]:
+        """The experiences a route may start from, in the order tried: the start's own; for a position, then the
+        nearest experience of each other part of the map within `off_route_distance` of it, nearest first. A robot
+        that has just relocalised is in the map's frame, but the experiences it made since it started are linked to
+        the map only once a closure ties them to it: its route starts at the map beside it."""
+        first = self.start_of(start)
+        if not isinstance(start, np.ndarray):
+            return [first]
+        point = start[:3, 3] if start.shape == (4, 4) else start
+        near = self.graph.within(point, self.config.navigation.off_route_distance)
+        near = near[np.argsort(np.linalg.norm(self.graph.positions[near, :2] - point[:2], axis=1), kind="stable")]
+        parts = self.graph.components
+        starts, seen = [first], {int(parts[first])}
+        for experience in near.tolist():
+            if int(parts[experience]) not in seen:
+                seen.add(int(parts[experience]))
+                starts.append(experience)
+        return starts
 
     def replan(self, goal: ResolvedGoal, position: np.ndarray) -> Route:
         """A route to a goal resolved before from where the robot is (`position`, map frame), on the map as it is

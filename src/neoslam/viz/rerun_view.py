@@ -15,6 +15,9 @@ world/loop_closures       a segment per accepted closure (stored frame to query 
 cells/head_direction      the head-direction ring's activity
 cells/grid_slice          the grid cells' activity in the (x, y) layer through the peak
 metrics/*                 objects, keyframes, loop closures, experiences, observations this frame, frame time
+world/route, world/waypoint, guidance/*   with a goal (`--goal`): the route, the next waypoint labelled with the
+                          guidance's state, its state as text when it changes, distance and bearing to the waypoint
+                          and distance left as scalars
 ```
 
 The whole-map layers (trajectories, objects, keyframes, closures) change only a little per frame but cost their
@@ -73,6 +76,8 @@ HEADING_ARROW_M = 3.0
 EPOCH_STAMP_S = 1e9
 CLASS_COLOURS = {"car": (66, 133, 244), "truck": (251, 140, 0), "bicycle": (67, 160, 71), "person": (229, 57, 53)}
 OTHER_COLOUR = (158, 158, 158)
+ROUTE_COLOUR = (0, 188, 212)
+ROUTE_WIDTH_M = 0.5
 
 
 def stderr_warning(line: str) -> None:
@@ -100,6 +105,17 @@ class _MapView:
 
 
 @dataclass(frozen=True)
+class _GuidanceView:
+    """A frame's guidance to a goal: its state, the route when it is new (or the map is logged), the waypoint."""
+
+    state: str
+    changed: bool  # the state differs from the previous frame's
+    route: np.ndarray | None  # (m, 3)
+    waypoint: np.ndarray | None  # (3,)
+    values: dict[str, float]
+
+
+@dataclass(frozen=True)
 class _FrameView:
     """What one frame shows, copied on the run's thread and logged on the sink's."""
 
@@ -115,6 +131,7 @@ class _FrameView:
     head_direction: np.ndarray
     grid_slice: np.ndarray
     metrics: dict[str, float]
+    guidance: _GuidanceView | None = None
 
 
 class RerunView:
@@ -132,6 +149,13 @@ class RerunView:
         self._last_call: float | None = None
         self._last_frame: tuple[int, float] | None = None
         self._unlogged_map: Any = None  # the NeoSLAM whose map changed since the map layers were last logged
+        self.guidance: Any = None  # a GoalGuidance (neoslam.navigation.session) to show, once `follow` is given one
+        self._route_shown: Any = None
+        self._state_shown: str | None = None
+
+    def follow(self, guidance: Any) -> None:
+        """Show a goal's guidance too: its record of the frame must be made before the view is called."""
+        self.guidance = guidance
 
     def __call__(self, slam: Any, frame: Any, pose: np.ndarray) -> None:
         if self.sink.lost:
@@ -151,7 +175,11 @@ class RerunView:
         view = self._frame_view(slam, frame, pose, self._map_view(slam) if map_due else None, frame_ms)
         if not self.sink.submit(frame.index, partial(_log_frame, self.rr, view)):
             self._unlogged_map = slam
-        elif map_due:
+            return
+        if view.guidance is not None:
+            self._route_shown = self.guidance.route if view.guidance.route is not None else self._route_shown
+            self._state_shown = view.guidance.state
+        if map_due:
             self._keyframes, self._closures = keyframes, closures
             self._unlogged_map = None
         else:
@@ -193,6 +221,26 @@ class RerunView:
             head_direction=np.array(slam.head_direction.activity),  # a copy, of the same dtype
             grid_slice=np.array(grid[:, :, slam.grid_cells.peak[2]]),
             metrics=values,
+            guidance=self._guidance_view(map_view is not None),
+        )
+
+    def _guidance_view(self, map_due: bool) -> _GuidanceView | None:
+        record = self.guidance.latest if self.guidance is not None else None
+        if record is None:
+            return None
+        route = self.guidance.route
+        shown = route is not None and (route is not self._route_shown or map_due)
+        guidance = record.guidance
+        values = {}
+        if guidance is not None and guidance.distance_m is not None:
+            values = {"distance_m": guidance.distance_m, "bearing_deg": float(np.degrees(guidance.bearing_rad))}
+            values["remaining_m"] = guidance.remaining_m
+        return _GuidanceView(
+            state=record.state,
+            changed=record.state != self._state_shown,
+            route=np.array(route.positions) if shown else None,
+            waypoint=None if guidance is None or guidance.waypoint_position is None else guidance.waypoint_position,
+            values=values,
         )
 
     def _map_view(self, slam: Any) -> _MapView:
@@ -243,6 +291,20 @@ def _log_frame(rr: Any, view: _FrameView, recording: Any) -> None:
     log("cells/grid_slice", rr.Tensor(view.grid_slice, dim_names=["x", "y"]))
     for name, value in view.metrics.items():
         log(f"metrics/{name}", rr.Scalars(float(value)))
+    if view.guidance is not None:
+        _log_guidance(rr, view.guidance, recording)
+
+
+def _log_guidance(rr: Any, view: _GuidanceView, recording: Any) -> None:
+    log = recording.log
+    if view.route is not None:
+        log("world/route", rr.LineStrips3D([view.route], colors=[ROUTE_COLOUR], radii=ROUTE_WIDTH_M))
+    if view.waypoint is not None:
+        log("world/waypoint", rr.Points3D([view.waypoint], colors=[ROUTE_COLOUR], radii=1.0, labels=[view.state]))
+    if view.changed:
+        log("guidance/state", rr.TextLog(view.state))
+    for name, value in view.values.items():
+        log(f"guidance/{name}", rr.Scalars(float(value)))
 
 
 def _log_final_map(rr: Any, index: int, stamp: float, view: _MapView, recording: Any) -> None:
