@@ -15,6 +15,8 @@ __all__ = [
     "ConfigOption",
     "GoalOption",
     "LeftTopicOption",
+    "LocaliseOnlyOption",
+    "MapOption",
     "OutOption",
     "OverwriteOption",
     "QuietOption",
@@ -44,6 +46,17 @@ CalibrationOption = Annotated[
 ]
 
 
+MapOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--map",
+        metavar="FILE",
+        help="Map file (SQLite) to start from and extend, created if missing; written as the run goes.",
+    ),
+]
+LocaliseOnlyOption = Annotated[
+    bool, typer.Option("--localise-only", help="Relocalise in the --map and use it; change nothing in it.")
+]
 RerunOption = Annotated[
     str | None,
     typer.Option(

@@ -14,6 +14,8 @@ from neoslam.cli.common import (
     ConfigOption,
     GoalOption,
     LeftTopicOption,
+    LocaliseOnlyOption,
+    MapOption,
     OverwriteOption,
     RerunOption,
     RightTopicOption,
@@ -37,13 +39,8 @@ def ros2_command(
     out: Annotated[
         Path | None, typer.Option("--out", "-o", help="Results folder written when the node stops (optional).")
     ] = None,
-    map_path: Annotated[
-        Path | None,
-        typer.Option("--map", metavar="FILE", help="Map file to start from and extend (created if missing)."),
-    ] = None,
-    localise_only: Annotated[
-        bool, typer.Option("--localise-only", help="Relocalise in the --map and use it; change nothing in it.")
-    ] = False,
+    map_path: MapOption = None,
+    localise_only: LocaliseOnlyOption = False,
     goal: GoalOption = None,
     stale: StaleOption = False,
     rerun: RerunOption = None,

@@ -13,6 +13,8 @@ from neoslam.cli.common import (
     ConfigOption,
     GoalOption,
     LeftTopicOption,
+    LocaliseOnlyOption,
+    MapOption,
     OutOption,
     OverwriteOption,
     QuietOption,
@@ -86,17 +88,8 @@ def run_command(
     ] = None,
     backend: Annotated[str | None, typer.Option(help="Map correction: relaxation or pose-graph.")] = None,
     rerun: RerunOption = None,
-    map_path: Annotated[
-        Path | None,
-        typer.Option(
-            "--map",
-            metavar="FILE",
-            help="Map file (SQLite) to start from and extend, created if missing; written as the run goes.",
-        ),
-    ] = None,
-    localise_only: Annotated[
-        bool, typer.Option("--localise-only", help="Relocalise in the --map and use it; change nothing in it.")
-    ] = False,
+    map_path: MapOption = None,
+    localise_only: LocaliseOnlyOption = False,
     goal: GoalOption = None,
     stale: StaleOption = False,
     config: ConfigOption = None,
