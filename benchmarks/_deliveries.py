@@ -29,6 +29,7 @@ from benchmarks._robot import STOPPING, Robot, choose_next
 from neoslam.datasets.simulated import simulated_observations
 from neoslam.geometry import integrate_body_velocities
 from neoslam.navigation.session import GoalGuidance
+from neoslam.navigation.view import pose_in_map
 from neoslam.pipeline import NeoSLAM
 from neoslam.sim.detections import DetectionSimulator
 from neoslam.sim.odometry import noisy_step
@@ -68,6 +69,7 @@ class Delivery:
     reason: str | None
     frames: int
     positions: np.ndarray  # (frames, 3) true positions, world frame
+    estimates: np.ndarray  # (frames, 3) the pose estimate's position, map frame (NaN until localised)
     driven: np.ndarray  # (frames,) true distance driven up to each frame, m
     localised: int | None
     planned: int | None
@@ -184,7 +186,7 @@ def run_delivery(mapped: MappedDrive, plan: DeliveryPlan) -> Delivery:
     robot = Robot.at(streets, plan.start, plan.towards)
     pose, odometry = robot.pose(), np.eye(4)
     linear, angular = np.zeros(3), np.zeros(3)
-    positions, driven, frame_ms = [], [0.0], []
+    positions, estimates, driven, frame_ms = [], [], [0.0], []
     limit = frame_limit(mapped, plan)
 
     def choose(node: int, came_from: int, yaw: float) -> int:
@@ -205,9 +207,11 @@ def run_delivery(mapped: MappedDrive, plan: DeliveryPlan) -> Delivery:
         detections = detector.detect(pose, index * dt, detection_rng)
         frame = Frame(index, index * dt, odometry, linear, angular, simulated_observations(detections, classes))
         started = time.perf_counter()
-        guidance(slam, frame, slam.step(frame))
+        estimate = slam.step(frame)
+        guidance(slam, frame, estimate)
         frame_ms.append(1e3 * (time.perf_counter() - started))
         positions.append(pose[:3, 3].copy())
+        estimates.append(estimate[:3, 3].copy() if pose_in_map(slam, estimate) is not None else np.full(3, np.nan))
     latest = guidance.latest
     route = guidance.route
     return Delivery(
@@ -216,6 +220,7 @@ def run_delivery(mapped: MappedDrive, plan: DeliveryPlan) -> Delivery:
         reason=guidance.error,
         frames=len(positions),
         positions=np.array(positions),
+        estimates=np.array(estimates),
         driven=np.array(driven[: len(positions)]),
         localised=guidance.events.localised,
         planned=guidance.events.planned,

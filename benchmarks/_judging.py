@@ -32,6 +32,7 @@ from benchmarks._robot import STOPPING
 __all__ = ["ARRIVAL_M", "FAILURE_COLUMNS", "SUMMARY_COLUMNS", "failures", "judge", "judged", "summary"]
 
 ARRIVAL_M = 5.0
+LOST_M = 50.0  # a pose estimate this far from the truth is lost (said in a failure's why)
 MIN_RATIO_PATH_M = 20.0  # a shorter route's ratio says little (the robot stops within ARRIVAL_M of its end)
 SUMMARY_COLUMNS = [
     "map",
@@ -102,6 +103,15 @@ def _route_ratio(mapped: MappedDrive, delivery: Delivery, arrival: np.ndarray | 
     return float(delivery.driven[-1] - delivery.driven[delivery.planned]) / shortest
 
 
+def _estimate_error(mapped: MappedDrive, delivery: Delivery) -> float | None:
+    """How far the robot's pose estimate (through T_world_map) was from the truth at the last frame, ground plane."""
+    estimate = delivery.estimates[-1]
+    if not np.isfinite(estimate).all():
+        return None
+    in_world = mapped.world_from_map[:3, :3] @ estimate + mapped.world_from_map[:3, 3]
+    return float(np.hypot(*(in_world[:2] - delivery.positions[-1, :2])))
+
+
 def judge(mapped: MappedDrive, delivery: Delivery) -> dict[str, Any]:
     """One delivery's row: what happened and whether it succeeded (see the module)."""
     plan = delivery.plan
@@ -140,6 +150,7 @@ def judge(mapped: MappedDrive, delivery: Delivery) -> dict[str, Any]:
         "seconds": delivery.frames * mapped.frame_period,
         "driven_m": float(delivery.driven[-1]),
         "ms_per_frame": statistics.median(delivery.frame_ms) if delivery.frame_ms else None,
+        "estimate_error_m": _estimate_error(mapped, delivery),
         "reason": delivery.reason,
     }
     return row | {"why": None if success else _why(row, world_object)}
@@ -158,7 +169,9 @@ def _why(row: dict[str, Any], world_object: int) -> str:
         return f"arrived {distance:.1f} m from the goal" + (" (at another object of its class)" * row["wrong_object"])
     if state == "missing":
         return f"goal object not sighted, reported missing{far}"
-    return f"{state}: {row['reason'] or 'no route from where the robot was'}{far}"
+    error = row["estimate_error_m"]
+    lost = "" if error is None or error <= LOST_M else f"; pose estimate {error:.3g} m off"
+    return f"{state}: {row['reason'] or 'no route from where the robot was'}{far}{lost}"
 
 
 def _median(values: list[float]) -> float | None:

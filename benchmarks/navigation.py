@@ -1,6 +1,7 @@
 """Navigation on the map: how fast routes are planned and guidance is given, on maps laid from the real KITTI
 ground-truth trajectories (the map of a good run: an experience every 5 m at the true pose, loop links where a
-drive comes back, objects along the streets; benchmarks/_navigation_maps.py).
+drive comes back, objects along the streets; benchmarks/_navigation_maps.py), and closed-loop deliveries in the
+simulator.
 
 (speed) Planning on maps of 1,000, 5,000 and 20,000 experiences: the one-off work on a map (its navigation graph:
 links, sparse matrix and KD-tree; its objects and their staleness), then `RoutePlanner.plan` from random start
@@ -11,11 +12,23 @@ half a metre of lateral jitter, with a detour 25 m off the route and back; the t
 (median, 95th percentile, largest) and of the frames that planned again. Targets: planning 10 ms or less (median)
 at 20,000 experiences, guidance 1 ms or less a frame.
 
-    python -m benchmarks.navigation [--quick] [--parts speed] [--sizes 1000 5000 20000] [--plans 100] [--seed 1]
+(deliveries) Simulated drives (KITTI 00 and 05 ground truth, the built-in town route; `vo` odometry, `real`
+detection) are mapped by NeoSLAM (benchmarks._delivery_maps); then, on each map, deliveries: a robot starts on a
+mapped street with no prior pose, relocalises as a new session of the map and drives on the true street graph
+(benchmarks._street_graph) by the guidance alone (benchmarks._robot), with the noisy odometry of the profile and the
+world's objects detected from where it truly is, until the guidance says it arrived (benchmarks._deliveries). Goals:
+objects by id, `nearest CLASS`, experiences, points on the streets, the start of the map; and objects taken out of
+the world before the delivery starts, which must be reported missing or unreachable. Judged by ground truth only
+(benchmarks._judging): arrival within 5 m of the goal, wrong objects, route length against the true shortest street
+path, time, relocalisation. Targets: 99 % of deliveries arrive within 5 m, no wrong object, every removed goal
+refused, route length at most 1.15 times the shortest (median).
 
-Parts are the functions in PARTS (name -> part(run) -> figures); another part (such as closed-loop deliveries in
-the simulator) is one more entry there, with its own table.
-"""
+    python -m benchmarks.navigation [--quick] [--parts speed deliveries] [--sizes 1000 5000 20000] [--plans 100]
+                                    [--seed 1] [--maps 00 05 town] [--deliveries 30] [--removed 5] [--workers N]
+
+Parts are the functions in PARTS (name -> part(run) -> figures), each with its own tables. A run of some of the
+parts only, without --out, writes `navigation-PART.json` (the parts' names joined), so that the stored result of
+the run of every part keeps its tables."""
 
 from __future__ import annotations
 

@@ -33,3 +33,11 @@ def test_playing_needs_images_and_frames_it_holds(cli, tmp_path: Path, shared_da
     cli.one_line_error(cli.invoke("ros2-play", tmp_path / "nowhere"), "not found")
     (tmp_path / "empty").mkdir()
     cli.one_line_error(cli.invoke("ros2-play", tmp_path / "empty"), "no stereo images here")
+
+
+def test_without_the_extra_the_ros2_commands_say_how_to_install_it(cli, monkeypatch, tmp_path: Path) -> None:
+    import sys
+
+    monkeypatch.setitem(sys.modules, "cyclonedds", None)  # as if it were not installed: its import fails
+    for args in (["ros2"], ["ros2-record", "/tf", "--out", tmp_path / "bag"]):
+        cli.one_line_error(cli.invoke(*args), 'pip install "neoslam[ros2]"')

@@ -1,6 +1,6 @@
 """Guidance on a synthetic drive along a route of the hand-built ladder: waypoints advance, bearings have the right
-sign, arrival comes within the radius and not before, leaving the route or a jump of the pose plans again, no pose
-is `not_localised`, and a frame costs well under a millisecond."""
+sign, arrival comes at the route's end within the radius and not before, leaving the route or a jump of the pose
+plans again, no pose is `not_localised`, and a frame costs well under a millisecond."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from tests.navigation.streets import ladder, pose_at
 from neoslam.config import NavigationConfig
 from neoslam.errors import NoRouteError
 from neoslam.navigation import Guide, RoutePlanner
+from neoslam.navigation.guidance import AT_END_M
 
 CONFIG = NavigationConfig()
 
@@ -39,7 +40,7 @@ def _drive(route, step: float = 1.0, lateral: float = 0.0) -> list[np.ndarray]:
     return poses
 
 
-def test_waypoints_advance_and_arrival_comes_within_the_radius_and_not_before(planned):
+def test_waypoints_advance_and_arrival_comes_at_the_route_end_within_the_radius_and_not_before(planned):
     planner, route = planned
     guide = Guide(route, CONFIG, planner.replan)
     records = [guide.update(pose) for pose in _drive(route, lateral=1.0)]
@@ -48,8 +49,9 @@ def test_waypoints_advance_and_arrival_comes_within_the_radius_and_not_before(pl
     assert waypoints == sorted(waypoints) and waypoints[-1] == len(route) - 1
     assert {r.state for r in records} == {"on_route", "arrived"}
     first = next(i for i, r in enumerate(records) if r.arrived)
-    assert all(r.goal_distance_m > CONFIG.arrival_radius for r in records[:first])
-    assert records[first].goal_distance_m <= CONFIG.arrival_radius
+    assert all(r.remaining_m > AT_END_M for r in records[:first])  # inside the radius, short of the end: on
+    assert any(r.goal_distance_m <= CONFIG.arrival_radius for r in records[:first])
+    assert records[first].goal_distance_m <= CONFIG.arrival_radius and records[first].remaining_m <= AT_END_M
     assert all(r.arrived and r.state == "arrived" for r in records[first:])
     remaining = [r.remaining_m for r in records]
     assert remaining[0] == pytest.approx(route.length_m, abs=0.01) and remaining[-1] == pytest.approx(0.0, abs=0.01)
@@ -58,6 +60,19 @@ def test_waypoints_advance_and_arrival_comes_within_the_radius_and_not_before(pl
         ahead = route.along_m[record.waypoint] - (route.length_m - record.remaining_m)
         assert ahead >= CONFIG.look_ahead - 1e-9 and record.distance_m <= ahead + 1.0 + 1e-9
         assert record.off_route_m == pytest.approx(1.0, abs=1e-6) or record.off_route_m < 1.0
+
+
+def test_a_robot_beside_the_route_end_arrives_and_one_far_beside_it_does_not(planned):
+    """At the route's end, the radius is how far beside it the robot may be."""
+    planner, route = planned
+    x, y = route.positions[-1][:2]  # (50, 50), the route comes from the east along the north street
+    near = Guide(route, CONFIG)
+    near.update(pose_at(x + 20.0, y, np.pi))
+    assert near.update(pose_at(x - 2.0, y + 3.0, np.pi)).state == "arrived"  # past the end, 3.6 m from it
+    far = Guide(route, CONFIG)
+    far.update(pose_at(x + 20.0, y, np.pi))
+    beside = far.update(pose_at(x, y + CONFIG.arrival_radius + 1.0, np.pi))
+    assert beside.state == "on_route" and beside.remaining_m == pytest.approx(0.0) and not beside.arrived
 
 
 def test_bearings_are_positive_to_the_left(planned):

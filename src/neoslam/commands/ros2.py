@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import threading
 from collections.abc import Callable, Sequence
 from contextlib import ExitStack
@@ -123,7 +124,7 @@ def run_node(
         live_run = node.run(stop, max_frames, idle_exit_s)
         metrics = live_metrics(live_run, config, session_name)
         if state.signum is not None:
-            metrics["live"]["stopped_by"] = f"signal {state.signum}"
+            metrics["live"]["stopped_by"] = signal.Signals(state.signum).name
         if guidance is not None:
             metrics["guidance"] = guidance.summary()
         if staging is not None:

@@ -52,7 +52,8 @@ class NavigationConfig(Section):
         5.0,
         gt=0,
         le=1000,
-        description="guidance: the robot has arrived within this distance of the route's end (the goal's position), m",
+        description="guidance: the robot has arrived once it has reached the route's end (the goal's position) within "
+        "this distance of it, m: how far beside the end it may be",
     )
     look_ahead: float = Field(
         8.0,
@@ -111,8 +112,9 @@ class NavigationConfig(Section):
         gt=0,
         le=100,
         description="guidance to an object: an observation of the goal's class this close to the goal object (in "
-        "the map, at the robot's pose) is a sighting of it, m; arriving without one since the route was planned is "
-        "reported missing, not arrived (a parked car that left)",
+        "the map, at the robot's pose) is a sighting of it, m; arriving at an object this session never sighted (in "
+        "a frame, or in the map's record of it when the route is planned) is reported missing, not arrived (a "
+        "parked car that left)",
     )
 
     @model_validator(mode="after")

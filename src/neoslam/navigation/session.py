@@ -10,8 +10,13 @@ guidance). A goal that cannot be planned (unknown, stale, ambiguous, out of reac
 
 An object goal must be seen to be reached: a parked car may have left since the map was made, and the map cannot
 know it until the robot looks. Every frame's observations of the goal's class are placed in the map (the robot's
-pose there) and one within `navigation.confirm_radius` of the goal object counts as a sighting. Arriving at an
-object goal never sighted since the route was planned is `missing`, not `arrived`.
+pose there, each moved from the surface the camera sees to the object's middle as the map's objects are); one within
+`navigation.confirm_radius` of the goal object, and nearer to it than to any other object of its class in the map,
+is a sighting. SIGHTINGS frames with one see the goal object (a single far observation of a neighbour can land on
+it: stereo depth is metres off at 50 m); so does the map's own record, when the route is planned, that this session
+observed the goal object (before it relocalised, say: the car it has just passed, which a route of a few metres
+reaches before the camera sees it again). Arriving at an object goal this session has not seen is `missing`, not
+`arrived`.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ import numpy as np
 from neoslam.config import NeoSLAMConfig
 from neoslam.errors import GoalError
 from neoslam.geometry import camera_points_to_robot
+from neoslam.loop.keyframes import object_centres
 from neoslam.navigation.goals import Goal, ObjectQuery, parse_goal
 from neoslam.navigation.guidance import Guidance, Guide
 from neoslam.navigation.route import Route, RoutePlanner
@@ -30,7 +36,11 @@ from neoslam.navigation.view import pose_in_map
 from neoslam.pipeline import NeoSLAM
 from neoslam.types import Frame
 
-__all__ = ["GoalGuidance", "GuidanceRecord", "GUIDANCE_COLUMNS"]
+__all__ = ["SIGHTINGS", "GoalGuidance", "GuidanceRecord", "GUIDANCE_COLUMNS"]
+
+# Frames that must see an object goal: one observation may be a neighbour's, tens of metres away, its depth metres off.
+SIGHTINGS = 2
+RIVALS_WITHIN = 3.0  # confirm radii: the map's objects of the goal's class this near it compete for an observation
 
 GUIDANCE_COLUMNS = (
     "frame",
@@ -110,7 +120,12 @@ class GoalGuidance:
         self.error: str | None = None  # why the goal is unreachable, once it is
         self._planner: RoutePlanner | None = None
         self._guide: Guide | None = None
-        self._seen = False
+        self._sightings = 0  # frames since the route was planned that saw the goal object
+        self._rivals = np.zeros((0, 2))  # the map's other objects of the goal's class near it (ground plane)
+
+    @property
+    def _seen(self) -> bool:
+        return self._sightings >= SIGHTINGS
 
     @property
     def route(self) -> Route | None:
@@ -137,7 +152,7 @@ class GoalGuidance:
         guidance = self._guide.update(in_map)
         if guidance.state == "replanned":
             self.events.replans += 1
-        self._seen = self._seen or self._sighted(frame, in_map)
+        self._sightings += self._sighted(frame, in_map)
         state = guidance.state
         if guidance.arrived and self._is_object_goal() and not self._seen:
             state = "missing"
@@ -171,6 +186,10 @@ class GoalGuidance:
             self.error = str(error)
             return False
         self._guide = Guide(route, self.config.navigation, replan=self._planner.replan)
+        found = route.goal.object
+        if found is not None and slam.session.id in found.sessions:  # the map's record: this session saw it
+            self._sightings = SIGHTINGS
+        self._rivals = self._rivals_of(route) if found is not None else np.zeros((0, 2))
         self.events.planned = frame_index
         self.events.first_route_m = route.length_m
         return True
@@ -179,17 +198,32 @@ class GoalGuidance:
         route = self.route
         return route is not None and route.goal.kind == "object"
 
+    def _rivals_of(self, route: Route) -> np.ndarray:
+        """(k, 2) the positions of the map's other objects of the goal object's class within RIVALS_WITHIN
+        confirm radii of it."""
+        assert self._planner is not None and route.goal.object is not None
+        found, objects = route.goal.object, self._planner.objects()
+        others = (objects.labels == found.label) & (objects.ids != found.id)
+        positions = objects.positions[others, :2]
+        near = np.hypot(*(positions - found.position[:2]).T) <= RIVALS_WITHIN * self.config.navigation.confirm_radius
+        return positions[near]
+
     def _sighted(self, frame: Frame, pose: np.ndarray) -> bool:
-        """Whether the frame saw the goal object: an observation of its class within confirm_radius of it."""
+        """Whether the frame saw the goal object: an observation of its class within confirm_radius of it and nearer
+        to it than to any other object of its class in the map (a neighbour's observation, off by its measurement
+        and the map's error, is the neighbour's)."""
         route = self.route
         if route is None or route.goal.kind != "object" or route.goal.object is None or not frame.observations:
             return False
         label = route.goal.object.label
-        centres = [o.center_camera for o in frame.observations if o.label == label]
-        if not centres:
+        seen = tuple(o for o in frame.observations if o.label == label)
+        if not seen:
             return False
-        in_robot = camera_points_to_robot(np.asarray(centres, dtype=float))
+        # the object's middle, as the map places it: stereo points lie on the surface facing the camera
+        in_robot = camera_points_to_robot(object_centres(seen, self.config.keyframes.footprints))
         in_map = in_robot @ pose[:3, :3].T + pose[:3, 3]
         gaps = np.hypot(*(in_map[:, :2] - route.goal.target[:2]).T)
-        return bool(gaps.min() <= self.config.navigation.confirm_radius)
-
+        theirs = np.full(len(gaps), np.inf)
+        if len(self._rivals):
+            theirs = np.linalg.norm(in_map[:, None, :2] - self._rivals[None], axis=2).min(axis=1)
+        return bool(((gaps <= self.config.navigation.confirm_radius) & (gaps < theirs)).any())
