@@ -4,7 +4,8 @@ street with no prior pose, relocalises in the map, and drives by the guidance al
 A delivery is planned from a seed (`plan_deliveries`): a start node on the true street graph and the direction it
 faces, and a goal of the goal language. The mix (GOAL_MIX): an object by id that a world object stands for, a class
 query (`nearest car`, the class drawn as often as the map holds it), an experience, a point on the streets (in the
-map's frame, through T_world_map) and `start`. A removed-goal delivery names an object by id whose world object is
+map's frame, through T_world_map) and `start of session 1` (the map's start: `start` alone is where the delivery's own
+session started). A removed-goal delivery names an object by id whose world object is
 taken out of the world before the robot starts.
 
 `run_delivery` drives it: a new session `NeoSLAM(config, stored=map)` (nothing written to disk) with a
@@ -68,8 +69,8 @@ class Delivery:
     state: str
     reason: str | None
     frames: int
-    positions: np.ndarray  # (frames, 3) true positions, world frame
-    estimates: np.ndarray  # (frames, 3) the pose estimate's position, map frame (NaN until localised)
+    poses: np.ndarray  # (frames, 4, 4) true poses T_world_robot
+    estimates: np.ndarray  # (frames, 4, 4) the pose estimates T_map_robot (NaN until localised)
     driven: np.ndarray  # (frames,) true distance driven up to each frame, m
     localised: int | None
     planned: int | None
@@ -78,6 +79,11 @@ class Delivery:
     resolved_target: np.ndarray | None  # (3,) what it resolved to, map frame (an object: the map's position of it)
     frame_ms: list[float]
     limit: int
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(frames, 3) true positions, world frame."""
+        return self.poses[:, :3, 3]
 
 
 def _goal(kind: str, mapped: MappedDrive, rng: np.random.Generator) -> tuple[str, np.ndarray | None, int]:
@@ -186,7 +192,7 @@ def run_delivery(mapped: MappedDrive, plan: DeliveryPlan) -> Delivery:
     robot = Robot.at(streets, plan.start, plan.towards)
     pose, odometry = robot.pose(), np.eye(4)
     linear, angular = np.zeros(3), np.zeros(3)
-    positions, estimates, driven, frame_ms = [], [], [0.0], []
+    poses, estimates, driven, frame_ms = [], [], [0.0], []
     limit = frame_limit(mapped, plan)
 
     def choose(node: int, came_from: int, yaw: float) -> int:
@@ -210,18 +216,18 @@ def run_delivery(mapped: MappedDrive, plan: DeliveryPlan) -> Delivery:
         estimate = slam.step(frame)
         guidance(slam, frame, estimate)
         frame_ms.append(1e3 * (time.perf_counter() - started))
-        positions.append(pose[:3, 3].copy())
-        estimates.append(estimate[:3, 3].copy() if pose_in_map(slam, estimate) is not None else np.full(3, np.nan))
+        poses.append(pose.copy())
+        estimates.append(estimate.copy() if pose_in_map(slam, estimate) is not None else np.full((4, 4), np.nan))
     latest = guidance.latest
     route = guidance.route
     return Delivery(
         plan=plan,
         state=latest.state if latest is not None else "not_localised",
         reason=guidance.error,
-        frames=len(positions),
-        positions=np.array(positions),
+        frames=len(poses),
+        poses=np.array(poses),
         estimates=np.array(estimates),
-        driven=np.array(driven[: len(positions)]),
+        driven=np.array(driven[: len(poses)]),
         localised=guidance.events.localised,
         planned=guidance.events.planned,
         resolved=None if route is None else route.goal.ids,

@@ -4,7 +4,8 @@
   made that experience; a point is the street point it was drawn at (its map coordinates are that point through
   T_world_map, so the map's own error counts against the delivery); an object is the street node nearest to the world
   object it stands for (objects stand up to 27 m off the street in the `real` profile: a robot on the street stops
-  beside them). A class query's object is the one the guidance resolved it to: the world object the map object
+  beside them), or the nearest node of another street within TIE_M as near (an object between two streets is beside
+  both). A class query's object is the one the guidance resolved it to: the world object the map object
   stands for (see benchmarks._delivery_maps; an object the delivery's own session added to the map, the nearest world
   object of its class within MATCH_RADIUS_M of its map position through T_world_map).
 - Success: the guidance said `arrived` and the robot's true position is within ARRIVAL_M of the arrival point (in the
@@ -28,11 +29,13 @@ import numpy as np
 from benchmarks._deliveries import Delivery, DeliveryPlan, run_delivery
 from benchmarks._delivery_maps import MATCH_RADIUS_M, MappedDrive
 from benchmarks._robot import STOPPING
+from neoslam.geometry import yaw_of
 
 __all__ = ["ARRIVAL_M", "FAILURE_COLUMNS", "SUMMARY_COLUMNS", "failures", "judge", "judged", "summary"]
 
 ARRIVAL_M = 5.0
-LOST_M = 50.0  # a pose estimate this far from the truth is lost (said in a failure's why)
+LOST_M, LOST_DEG = 10.0, 20.0  # a pose estimate this far off the truth is said in a failure's why
+TIE_M = 2.0  # an object's other street this much farther than its nearest is beside it too
 MIN_RATIO_PATH_M = 20.0  # a shorter route's ratio says little (the robot stops within ARRIVAL_M of its end)
 SUMMARY_COLUMNS = [
     "map",
@@ -45,6 +48,7 @@ SUMMARY_COLUMNS = [
     "timeouts",
     "unreachable",
     "missing",
+    "pose_off",
     "route_ratio_median",
     "route_ratio_p90",
     "relocalisation_m_median",
@@ -72,12 +76,25 @@ def _object_of(mapped: MappedDrive, delivery: Delivery) -> int:
 
 
 def _arrival_point(mapped: MappedDrive, delivery: Delivery, world_object: int) -> np.ndarray | None:
+    """The goal's arrival point nearest to where the robot stopped (None: an object goal that stands for none)."""
     plan = delivery.plan
-    if plan.kind in ("object", "removed", "class"):
-        if world_object < 0:
-            return None
-        return mapped.streets.positions[mapped.streets.nearest(mapped.world.positions[world_object])]
-    return np.asarray(plan.target, dtype=float)
+    if plan.kind not in ("object", "removed", "class"):
+        return np.asarray(plan.target, dtype=float)
+    if world_object < 0:
+        return None
+    points = _beside(mapped, mapped.world.positions[world_object])
+    stop = delivery.positions[-1]
+    return points[int(np.argmin(np.hypot(*(points[:, :2] - stop[:2]).T)))]
+
+
+def _beside(mapped: MappedDrive, target: np.ndarray) -> np.ndarray:
+    """(k, 3) the street points beside an object: the nearest street node, and the nearest node of every other street
+    nearly as near (within TIE_M; a node no farther from it than its neighbours), for an object between streets."""
+    streets = mapped.streets
+    distance = np.hypot(*(streets.positions[:, :2] - target[:2]).T)
+    near = np.flatnonzero(distance <= distance.min() + TIE_M)
+    nearest = [n for n in near if all(distance[n] <= distance[k] for k in streets.neighbours[n])]
+    return streets.positions[nearest]
 
 
 def _at_another(mapped: MappedDrive, stop: np.ndarray, world_object: int) -> tuple[bool, bool]:
@@ -103,13 +120,27 @@ def _route_ratio(mapped: MappedDrive, delivery: Delivery, arrival: np.ndarray | 
     return float(delivery.driven[-1] - delivery.driven[delivery.planned]) / shortest
 
 
-def _estimate_error(mapped: MappedDrive, delivery: Delivery) -> float | None:
-    """How far the robot's pose estimate (through T_world_map) was from the truth at the last frame, ground plane."""
-    estimate = delivery.estimates[-1]
-    if not np.isfinite(estimate).all():
-        return None
-    in_world = mapped.world_from_map[:3, :3] @ estimate + mapped.world_from_map[:3, 3]
-    return float(np.hypot(*(in_world[:2] - delivery.positions[-1, :2])))
+def _estimate_errors(mapped: MappedDrive, delivery: Delivery) -> tuple[float | None, float | None]:
+    """The largest ground-plane position error (m) and heading error (degrees) of the robot's pose estimate, through
+    T_world_map, over the frames it was localised (None: never)."""
+    localised = np.isfinite(delivery.estimates[:, 0, 0])
+    if not localised.any():
+        return None, None
+    estimates = mapped.world_from_map @ delivery.estimates[localised]
+    truth = delivery.poses[localised]
+    position = np.hypot(*(estimates[:, :2, 3] - truth[:, :2, 3]).T)
+    heading = np.angle(np.exp(1j * (yaw_of(estimates) - yaw_of(truth))))
+    return float(position.max()), float(np.degrees(np.abs(heading).max()))
+
+
+def _against_the_map(mapped: MappedDrive, delivery: Delivery) -> bool:
+    """Whether the robot drove against the direction the mapping drive took there, when it localised (or at its
+    last frame, never localised): the street seen from its other side."""
+    frame = delivery.localised if delivery.localised is not None else delivery.frames - 1
+    here = delivery.poses[frame]
+    nearest = int(np.argmin(np.linalg.norm(mapped.truth.positions[:, :2] - here[:2, 3], axis=1)))
+    turn = np.angle(np.exp(1j * (yaw_of(here[None])[0] - yaw_of(mapped.truth.poses[nearest][None])[0])))
+    return bool(abs(turn) > np.pi / 2)
 
 
 def judge(mapped: MappedDrive, delivery: Delivery) -> dict[str, Any]:
@@ -130,6 +161,7 @@ def judge(mapped: MappedDrive, delivery: Delivery) -> dict[str, Any]:
             at_another, nearest_other = _at_another(mapped, stop, world_object)
             wrong = not within and at_another
     success = delivery.state in ("missing", "unreachable") if removed else within
+    position_error, heading_error = _estimate_errors(mapped, delivery)
     row = {
         "map": plan.map,
         "delivery": plan.index,
@@ -150,13 +182,25 @@ def judge(mapped: MappedDrive, delivery: Delivery) -> dict[str, Any]:
         "seconds": delivery.frames * mapped.frame_period,
         "driven_m": float(delivery.driven[-1]),
         "ms_per_frame": statistics.median(delivery.frame_ms) if delivery.frame_ms else None,
-        "estimate_error_m": _estimate_error(mapped, delivery),
+        "estimate_error_m": position_error,
+        "heading_error_deg": heading_error,
+        "against_map": _against_the_map(mapped, delivery),
         "reason": delivery.reason,
     }
     return row | {"why": None if success else _why(row, world_object)}
 
 
 def _why(row: dict[str, Any], world_object: int) -> str:
+    """What went wrong, with the pose estimate's largest error when it was off (LOST_M or LOST_DEG) and whether the
+    robot relocalised driving against the mapped direction."""
+    why = _what(row, world_object)
+    position, heading = row["estimate_error_m"], row["heading_error_deg"]
+    if _off(row):
+        why += f"; pose estimate off by up to {position:.3g} m, {heading:.0f} deg"
+    return why + ("; relocalised against the mapped direction" if row["against_map"] else "")
+
+
+def _what(row: dict[str, Any], world_object: int) -> str:
     state, distance = row["state"], row["distance_m"]
     far = "" if distance is None else f", {distance:.1f} m from the goal"
     if row["removed"]:
@@ -169,9 +213,13 @@ def _why(row: dict[str, Any], world_object: int) -> str:
         return f"arrived {distance:.1f} m from the goal" + (" (at another object of its class)" * row["wrong_object"])
     if state == "missing":
         return f"goal object not sighted, reported missing{far}"
-    error = row["estimate_error_m"]
-    lost = "" if error is None or error <= LOST_M else f"; pose estimate {error:.3g} m off"
-    return f"{state}: {row['reason'] or 'no route from where the robot was'}{far}{lost}"
+    return f"{state}: {row['reason'] or 'no route from where the robot was'}{far}"
+
+
+def _off(row: dict[str, Any]) -> bool:
+    """Whether the pose estimate was off by more than LOST_M or LOST_DEG at some localised frame."""
+    position, heading = row["estimate_error_m"], row["heading_error_deg"]
+    return position is not None and (position > LOST_M or heading > LOST_DEG)
 
 
 def _median(values: list[float]) -> float | None:
@@ -199,6 +247,7 @@ def summary(rows: list[dict[str, Any]], name: str) -> dict[str, Any]:
         "timeouts": sum(r["timeout"] for r in rows),
         "unreachable": sum(r["state"] == "unreachable" for r in goals),
         "missing": sum(r["state"] == "missing" for r in goals),
+        "pose_off": sum(_off(r) for r in rows),
         "route_ratio_median": _median(ratios),
         "route_ratio_p90": _p90(ratios),
         "relocalisation_m_median": _median([r["relocalisation_m"] for r in rows if r["relocalisation_m"] is not None]),

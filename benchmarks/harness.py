@@ -149,7 +149,18 @@ def load_average() -> list[float] | None:
 
 
 def command_line(name: str, argv: list[str]) -> str:
-    return shlex.join(["python", "-m", f"benchmarks.{name}", *argv])
+    """The command that made a result, as stored and quoted in the docs: without `--out PATH`, which names a file of
+    the machine that ran it and changes no figure."""
+    kept: list[str] = []
+    skip = False
+    for argument in argv:
+        if skip:
+            skip = False
+        elif argument == "--out":
+            skip = True
+        elif not argument.startswith("--out="):
+            kept.append(argument)
+    return shlex.join(["python", "-m", f"benchmarks.{name}", *kept])
 
 
 def jsonable(value: Any) -> Any:

@@ -63,6 +63,7 @@ POINT_SPREAD_M = 5.0  # a point goal lies this far (at most, each axis) from an 
 MAPS, QUICK_MAPS = ["00", "05", "town"], ["town"]  # deliveries: the drives mapped
 DELIVERIES, QUICK_DELIVERIES = 30, 2  # a map
 REMOVED, QUICK_REMOVED = 5, 1  # deliveries to a removed goal, a map
+DIRECTIONS = {False: "with the map", True: "against the map"}  # deliveries: the way it drove when it relocalised
 DELIVERIES_PER_TASK = 10  # a worker's task: this many deliveries on one map (a worker takes seconds to start)
 
 
@@ -262,9 +263,12 @@ def run_deliveries(run: harness.Run) -> dict:
     run.table("deliveries", table, SUMMARY_COLUMNS, title=title)
     kinds = [summary([r for r in rows if r["kind"] == kind], kind) for kind in [*GOAL_MIX, "removed"]]
     run.table("deliveries_by_goal", kinds, ["map", *SUMMARY_COLUMNS[1:]], title="## By kind of goal (all maps)")
+    ways = [summary([r for r in rows if r["against_map"] == against], way) for against, way in DIRECTIONS.items()]
+    title = "## By the direction the robot drove when it relocalised, against the mapping drive's there (all maps)"
+    run.table("deliveries_by_direction", ways, ["map", *SUMMARY_COLUMNS[1:]], title=title)
     run.table("delivery_failures", failures(rows), FAILURE_COLUMNS, title="## Failures")
     return {"maps": names, "deliveries_per_map": count, "removed_per_map": removed, "summary": table,
-            "by_goal": kinds, "rows": rows}  # fmt: skip
+            "by_goal": kinds, "by_direction": ways, "rows": rows}  # fmt: skip
 
 
 PARTS: dict[str, Callable[[harness.Run], dict]] = {"speed": run_speed, "deliveries": run_deliveries}

@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from benchmarks import navigation
+from benchmarks._judging import _beside
 from benchmarks._robot import MAX_YAW_RATE, Robot, choose_next, explore, follow
 from benchmarks._street_graph import SPACING_M, street_graph
 
@@ -109,13 +111,24 @@ def test_the_controller_follows_the_bearing_and_turns_round_only_for_a_waypoint_
     assert {east, south} <= onward
 
 
+def test_an_object_between_two_streets_is_beside_both():
+    """The judge's arrival points of an object: the nearest street point, and another street's nearly as near."""
+    graph = street_graph(_line([(0, 0), (100, 0), (100, 100)]))
+    mapped = SimpleNamespace(streets=graph)
+    between = _beside(mapped, np.array([80.0, 20.0, 0.0]))  # 20 m from both streets
+    assert sorted(map(tuple, between[:, :2].round())) == [(80.0, 0.0), (100.0, 20.0)]
+    kerb = _beside(mapped, np.array([40.0, 5.0, 0.0]))
+    assert kerb[:, :2].round().tolist() == [[40.0, 0.0]]
+
+
 @pytest.mark.slow  # maps the block route and drives two deliveries and a removed goal: a minute or two
 def test_the_deliveries_part_runs_and_writes_its_tables(tmp_path: Path, capsys) -> None:
     out = tmp_path / "navigation.json"
     argv = ["--quick", "--parts", "deliveries", "--maps", "block", "--deliveries", "2", "--removed", "1"]
     navigation.main([*argv, "--workers", "1", "--out", str(out)])
     result = json.loads(out.read_text())
-    assert set(result["tables"]) == {"delivery_maps", "deliveries", "deliveries_by_goal", "delivery_failures"}
+    tables = {"delivery_maps", "deliveries", "deliveries_by_goal", "deliveries_by_direction", "delivery_failures"}
+    assert set(result["tables"]) == tables
     rows = result["figures"]["deliveries"]["rows"]
     assert len(rows) == 3 and [r["removed"] for r in rows] == [False, False, True]
     total = result["tables"]["deliveries"]["rows"][-1]

@@ -1,6 +1,7 @@
 """Two sessions in one simulated world (NeoSLAM with a stored map, in memory; the map file is tests/store and
 tests/test_cli_map.py): the second starts elsewhere, in its own frame, with its own noise, relocalises in the first
-one's map and ends in its frame; a session whose world the map never saw never joins it."""
+one's map and ends in its frame; a session whose world the map never saw never joins it; a session driving a mapped
+street the other way joins the map once and keeps its heading."""
 
 from __future__ import annotations
 
@@ -10,9 +11,10 @@ import pytest
 from neoslam.config import NeoSLAMConfig
 from neoslam.config.profiles import simulation_config
 from neoslam.datasets.simulated import write_dataset
-from neoslam.geometry import invert_pose
-from neoslam.sim.routes import ROUTES, drive_route
+from neoslam.geometry import invert_pose, yaw_of
+from neoslam.sim.routes import ROUTES, Route, drive_route
 from neoslam.sim.session_drives import session_recordings
+from neoslam.types import Trajectory
 
 TRUE_PLACE_M = 5.0  # a closure is true when its two frames are this close in the ground truth
 SAME_PLACE_M = 2.0  # a frame of B drives A's street when it passes this close to a frame of A (ground truth)
@@ -63,3 +65,47 @@ def test_a_session_in_a_world_the_map_never_saw_never_joins_it(town_session_a, s
     assert result.session.relocalised_frame is None
     assert result.loop_closures == result.session_closures()
     assert np.array_equal(state.experience_poses[: len(poses)], poses), "the stored part moved"
+
+
+def _there_and_back(route: Route, frame_period: float, camera_height: float) -> Trajectory:
+    """A flat route driven to its end, then back along itself facing the other way (the turn itself left out: the
+    two passes are two sessions)."""
+    out = drive_route(route, frame_period, camera_height)
+    turned = np.diag([-1.0, -1.0, 1.0, 1.0])  # half a turn about the robot's vertical
+    back = out.poses[::-1] @ turned
+    stamps = np.concatenate([out.timestamps, out.timestamps[-1] + frame_period + out.timestamps])
+    return Trajectory(stamps, np.concatenate([out.poses, back]))
+
+
+@pytest.mark.slow
+def test_a_session_driving_a_mapped_street_the_other_way_joins_the_map_once_and_keeps_its_heading(
+    session_driver, tmp_path
+):
+    # Session B starts where A's drive ended and drives A's L-shaped street back to its start: every place it
+    # recognises, it sees from the other side. Relocalising joins it to A's map for good: its later closures link
+    # into the map as loop closures (they used to join it again each time, moving the whole session by that one
+    # fit, and the rounding error of those joins doubled each time until the poses blew up).
+    config = simulation_config(CONFIG, "vo", 3)
+    street = Route("street", "an L-shaped street", ((0.0, 0.0), (200.0, 0.0), (200.0, 100.0)))
+    sim = config.simulator
+    truth = _there_and_back(street, sim.frame_period, sim.camera.height_above_ground)
+    half = len(truth) // 2
+    a, b = session_recordings(truth, [(0, half), (half, len(truth))], sim, [3, 4], "street")
+    for session, name in ((a, "a"), (b, "b")):
+        write_dataset(tmp_path / name, session.recording)
+    stored, result_a = session_driver(tmp_path / "a", config, None, a.recording.name)
+    _, result = session_driver(tmp_path / "b", config, stored, b.recording.name)
+    relocalised = result.session.relocalised_frame
+    assert relocalised is not None and relocalised < half // 2
+    assert len(result.experience_map.parts.roots()) == 1, "the session stayed a part of the map of its own"
+    into_map = [c for c in result.loop_closures if c.match_keyframe < result.first_keyframe]
+    assert len(into_map) > 1, "no closures with the map after the join"
+    # From relocalising on, B's estimate lies where A's has the same place (A's map is off the truth by its own
+    # drift, which B inherits), turned half a turn from A's heading there.
+    truth_in_a = (invert_pose(a.start_pose) @ b.to_world(b.recording.truth.poses))[relocalised:]
+    same_place = np.linalg.norm(truth_in_a[:, None, :2, 3] - a.recording.truth.poses[None, :, :2, 3], axis=2)
+    estimate, estimate_a = result.estimate.poses[relocalised:], result_a.estimate.poses[same_place.argmin(axis=1)]
+    disagreement = np.linalg.norm(estimate[:, :2, 3] - estimate_a[:, :2, 3], axis=1)
+    turn = np.angle(np.exp(1j * (yaw_of(estimate) - yaw_of(estimate_a) - np.pi)))
+    assert disagreement.max() < 5.0, disagreement.max()
+    assert np.degrees(np.abs(turn)).max() < 5.0, np.degrees(np.abs(turn)).max()

@@ -216,20 +216,27 @@ def test_a_publisher_that_stops_and_comes_back_is_mapped_again(
     assert (mapped.timestamps > base.timestamps[30]).any()
 
 
+@pytest.mark.parametrize("detect_ahead", [False, True], ids=["one_pair_at_a_time", "detect_ahead"])
 def test_a_camera_faster_than_the_node_is_mapped_on_its_newest_frames_without_a_queue(
-    kitti_06_51: Path, domain_id: int, tmp_path: Path
+    kitti_06_51: Path, domain_id: int, tmp_path: Path, cli, detect_ahead: bool
 ) -> None:
     import json
 
     results = tmp_path / "live"
-    node = _neoslam("ros2", "--out", results, "--domain-id", domain_id, "--idle-exit", 3)
+    setting = {"NEOSLAM_LIVE__DETECT_AHEAD": str(detect_ahead).lower()}
+    node = _neoslam("ros2", "--out", results, "--domain-id", domain_id, "--idle-exit", 3, env=setting)
     _finish(_neoslam("ros2-play", kitti_06_51, "--sequence", "06", "--wait", 120, "--domain-id", domain_id))
     _finish(node)
     live = json.loads((results / "metrics.json").read_text())["live"]
     assert live["pairs_dropped"] > 0 and live["frames"] < 51
     assert live["frames"] + live["pairs_dropped"] <= live["pairs_received"]
-    # no queue: a mapped pair waited at most for the one frame being mapped before it
+    # no queue: a mapped pair waited at most for the one frame being mapped before it (and its detection)
     assert live["latency_ms_p95"] < 1000 * 3
+    # the frames it mapped, with gaps between them, are mapped as `neoslam run` maps those frames
+    mapped = read_trajectory(results / "trajectory_tum.txt", "tum")
+    offline = _offline_results(cli, kitti_06_51, mapped.timestamps, tmp_path)
+    for name in COMPARED_FILES:
+        assert (results / name).read_bytes() == (offline / name).read_bytes(), name
 
 
 def test_an_odometry_topic_gives_the_motion_instead_of_stereo_odometry(

@@ -12,7 +12,7 @@ from neoslam.config import ExperienceMapConfig
 from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error
 from neoslam.geometry import invert_pose, make_pose, relative_pose, transform_points
 from neoslam.mapping.experience_map import CellState, ExperienceMap
-from neoslam.types import LoopClosure, Trajectory
+from neoslam.types import LoopClosure, MapState, Trajectory
 
 DIMS = (36, 36, 36)
 RING = 36
@@ -599,3 +599,53 @@ def test_a_late_closure_of_a_merged_keyframe_links_where_it_was_merged(biased_sq
     assert [(k.source, k.target, k.kind) for k in experience_map.graph.links[links:]] == [(1, 0, "loop")]
     # unknown keyframes are not closures of the map
     assert not experience_map.close_loop(closure(per_lap + 7, 1, np.eye(4)), cells())
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Sessions: a later session joins a stored map (neoslam.store)
+
+
+def street_map(length: int) -> ExperienceMap:
+    """A map of a straight street driven east, a metre a frame, a keyframe every KEYFRAME_EVERY frames."""
+    stored = new_map()
+    drive(stored, np.array([pose(0.0, (float(x), 0.0, 0.0)) for x in range(length)]))
+    return stored
+
+
+def later_session(stored: ExperienceMap) -> ExperienceMap:
+    """A new session over the stored map, in its own frame: session 2, with no experience yet."""
+    experience_map = new_map()
+    state = MapState(
+        keyframe_experience=dict(stored.keyframe_experiences),
+        experiences=stored.experiences,
+        experience_poses=stored.graph.poses.copy(),
+        links=stored.graph.links,
+    )
+    experience_map.restore(state, session=2)
+    return experience_map
+
+
+def test_a_session_driving_the_street_the_other_way_joins_the_map_once() -> None:
+    # The stored street runs east from x = 0 to 59; the session starts at x = 50 facing west (its frame's origin)
+    # and drives west. Its first closure, stored keyframe 10 (x = 50) seen from the other side, joins it to the map;
+    # from then on its closures are loop links in one map (driving against the map it re-enters no stored
+    # experience, and the join used to be all that tied the two, so every later closure joined the session again).
+    stored = street_map(60)
+    experience_map = later_session(stored)
+    first = max(stored.keyframe_experiences) + 1  # the session's keyframe ids follow the stored ones
+    turned = pose(np.pi)  # T_stored_query: the same place, facing the other way
+    odometry = [pose(0.0, (float(x), 0.0, 0.0)) for x in range(12)]  # the session's own frame: forward is west
+    experience_map.step(0, odometry[0], VELOCITIES, cells(), 0.0, first)
+    assert experience_map.join(closure(first, 10, turned), experience_map.current_pose(odometry[0]))
+    assert len(experience_map.parts.roots()) == 1
+    links = len(experience_map.graph.links)
+    assert experience_map.close_loop(closure(first, 10, turned), cells())  # accepted, and linked by the join
+    assert len(experience_map.graph.links) == links
+    for frame in range(1, 6):
+        experience_map.step(frame, odometry[frame], VELOCITIES, cells(), 1.0, first + 1 if frame == 5 else None)
+    later = closure(first + 1, 9, turned)  # five metres on, stored keyframe 9 (x = 45)
+    assert not experience_map.join(later, experience_map.current_pose(odometry[5]))
+    assert experience_map.close_loop(later, cells())
+    assert [k.kind for k in experience_map.graph.links[links:]] == ["odometry", "loop"]
+    # the session is in the map's frame, at x = 45 heading west
+    np.testing.assert_allclose(experience_map.current_pose(odometry[5]), pose(np.pi, (45.0, 0.0, 0.0)), atol=1e-9)

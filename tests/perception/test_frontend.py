@@ -176,3 +176,18 @@ def test_the_overlapped_stages_give_the_frames_of_one_at_a_time_on_real_images(
         assert [(o.label, o.score, o.box_left.tolist(), o.center_camera.tolist()) for o in a.observations] == [
             (o.label, o.score, o.box_left.tolist(), o.center_camera.tolist()) for o in b.observations
         ]
+
+
+def test_stage_times_total_only_the_frames_that_passed_every_stage() -> None:
+    """A live node stopped while the next pair was already detected has one detection more than placements."""
+    from neoslam.perception.frontend import PerceptionTimes
+
+    times = PerceptionTimes()
+    for seconds in (0.05, 0.05, 0.05):
+        times.add("detection", seconds)
+    for stage in ("stereo", "odometry"):
+        for seconds in (0.01, 0.01):
+            times.add(stage, seconds)
+    figures = times.summary()
+    assert figures["detection_ms_median"] == 50.0
+    assert figures["total_ms_median"] == 70.0

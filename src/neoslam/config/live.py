@@ -99,6 +99,13 @@ class LiveConfig(Section):
         description="a gap between successive pairs' stamps longer than this (a camera or publisher that stopped and "
         "came back) restarts the stereo odometry's tracking from the new frame: the motion in the gap is unknown",
     )
+    detect_ahead: bool = Field(
+        False,
+        description="detect objects in the next pair, in a thread of its own, while the current one is placed, "
+        "tracked and mapped (the same frames give the same bytes): for a machine with cores to spare beside the "
+        "network's perception.detector.threads; on two cores the two contend and a pair's latency grows (see "
+        "benchmarks/live.py); false: one pair at a time",
+    )
     stop_grace_s: float = Field(
         0.6,
         gt=0,

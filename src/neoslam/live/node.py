@@ -3,9 +3,11 @@ published for every frame and the map whenever it changes.
 
 The loop takes the newest pair the receiver holds (neoslam.live.receiver), so a node slower than its camera skips
 frames instead of falling behind; decodes, rectifies and maps it exactly as `neoslam run` maps a recorded frame
-(the same `StereoFrontEnd` and `NeoSLAM.step`), then publishes (neoslam.live.outputs). Given the same frames it
-gives the same trajectory, byte for byte, as the offline run. NeoSLAM.step is not changed for it: the node is a
-client of the pipeline, as the offline run is.
+(the same `StereoFrontEnd` and `NeoSLAM.step`), then publishes (neoslam.live.outputs). With `live.detect_ahead`
+(off by default) the network detects objects in the next pair, in a thread of its own, while the current pair is
+placed, tracked and mapped: the next pair is taken when that thread is free, so a pair waits for no queue. Given the
+same frames it gives the same trajectory, byte for byte, as the offline run. NeoSLAM.step is not changed for it: the
+node is a client of the pipeline, as the offline run is.
 """
 
 from __future__ import annotations
@@ -13,7 +15,8 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -31,7 +34,7 @@ from neoslam.live.transport import Ros2Domain
 from neoslam.navigation.session import GoalGuidance
 from neoslam.perception.detection import ObjectDetector
 from neoslam.perception.detector import make_detector
-from neoslam.perception.frontend import StereoFrontEnd, StereoMotion
+from neoslam.perception.frontend import DetectedPair, StereoFrontEnd, StereoMotion, StereoPair
 from neoslam.perception.odometry import StereoOdometry
 from neoslam.perception.stereo import ObjectTriangulator
 from neoslam.pipeline import NeoSLAM, RunResult, StepObserver
@@ -94,6 +97,26 @@ class _Map:
     closure_events: int = 0
     relocalised: bool = False
     pending: bool = False
+
+
+@dataclass(frozen=True)
+class _Detected:
+    """A pair as received and its left image's detections."""
+
+    pair: StereoMessages
+    objects: DetectedPair
+
+
+@dataclass(frozen=True)
+class _Ahead:
+    """A pair whose detection runs in the detection thread."""
+
+    pair: StereoMessages
+    running: Future[DetectedPair]
+
+    def detected(self) -> _Detected:
+        """Waits for the detection (a network's inference: well under the second a stop may take)."""
+        return _Detected(self.pair, self.running.result())
 
 
 @dataclass
@@ -181,21 +204,29 @@ class LiveNode:
         started, cpu_started = time.monotonic(), time.process_time()
         last_pair: float | None = None
         stopped_by = "signal"
-        while not stop.is_set():
-            pair = receiver.mailbox.take(POLL_S)
-            now = time.monotonic()
-            if pair is None:
-                self._report_waiting(now - started, receiver, domain)
-                if idle_exit_s is not None and last_pair is not None and now - last_pair > idle_exit_s:
-                    stopped_by = "idle"
+        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="neoslam-detection") as detection:
+            ahead: _Ahead | None = None  # the pair whose objects the detection thread is finding
+            while not stop.is_set():
+                # The newest pair is taken only once the detection thread is free, so it starts at once.
+                detected = ahead.detected() if ahead is not None else None
+                pair = receiver.mailbox.take(0.0 if detected is not None else POLL_S)
+                now = time.monotonic()
+                ahead = None if pair is None else self._detect(pair, receiver, detection)
+                if pair is not None:
+                    last_pair = now
+                if ahead is not None and not self.live.detect_ahead:  # one pair at a time
+                    detected, ahead = ahead.detected(), None
+                if detected is not None:
+                    self._map_pair(detected, receiver, slam, outputs, track, shown)
+                elif pair is None:
+                    self._report_waiting(now - started, receiver, domain)
+                    if idle_exit_s is not None and last_pair is not None and now - last_pair > idle_exit_s:
+                        stopped_by = "idle"
+                        break
+                status.publish_when_due(outputs, now, track.stamps_ns[-1] if track.stamps_ns else 0)
+                if max_frames is not None and len(track.stamps_ns) >= max_frames:
+                    stopped_by = "frames"
                     break
-            else:
-                last_pair = now
-                self._map_pair(pair, receiver, slam, outputs, track, shown)
-            status.publish_when_due(outputs, now, track.stamps_ns[-1] if track.stamps_ns else 0)
-            if max_frames is not None and len(track.stamps_ns) >= max_frames:
-                stopped_by = "frames"
-                break
         result = slam.result(np.asarray(track.step_s))
         if self.on_finish is not None:
             self.on_finish()
@@ -217,13 +248,31 @@ class LiveNode:
             camera=self._camera.camera if self._camera is not None else None,
         )
 
+    def _detect(self, pair: StereoMessages, receiver: Receiver, detection: ThreadPoolExecutor) -> _Ahead | None:
+        """The pair decoded and rectified, its detection started in the detection thread; None (counted) when it
+        cannot be mapped (no calibration yet, a bad message)."""
+        if self._camera is None and not self._calibrate(pair, receiver):
+            return None
+        assert self._camera is not None and self._front_end is not None
+        try:
+            left, right = self._camera.grey_pair(pair.left, pair.right)
+        except MessageError as error:
+            self._skip("bad_message", f"a stereo pair at {stamp_seconds(pair.stamp_ns):.3f} s is skipped: {error}")
+            return None
+        stereo = StereoPair(0, stamp_seconds(pair.stamp_ns), left, right)  # its index is given when it is mapped
+        return _Ahead(pair, detection.submit(self._front_end.detected, stereo))
+
     def _map_pair(
-        self, pair: StereoMessages, receiver: Receiver, slam: NeoSLAM, outputs: Outputs, track: _Track, shown: _Map
+        self, detected: _Detected, receiver: Receiver, slam: NeoSLAM, outputs: Outputs, track: _Track, shown: _Map
     ) -> None:
-        """One pair through the front end and NeoSLAM, its pose published, the map too if it changed."""
-        frame = self._frame(pair, receiver, len(track.stamps_ns), track)
-        if frame is None:
+        """One detected pair placed, tracked and through NeoSLAM, its pose published, the map too if it changed."""
+        pair = detected.pair
+        assert self._front_end is not None
+        if not self._move(pair, receiver, track):
             return
+        index = len(track.stamps_ns)
+        objects = DetectedPair(replace(detected.objects.pair, index=index), detected.objects.detections)
+        frame = self._front_end.moved(self._front_end.triangulated(objects))
         start = time.perf_counter()
         pose = slam.step(frame)
         track.step_s.append(time.perf_counter() - start)
@@ -235,24 +284,10 @@ class LiveNode:
             self._guide(slam, frame, pose, outputs, pair.stamp_ns)
         if self.on_step is not None:
             self.on_step(slam, frame, pose)
-        if len(track.stamps_ns) == 1 and self.inform is not None:
+        if index == 0 and self.inform is not None:
             self.inform(self._first_frame_line(pair.stamp_ns))
         self._publish_events(slam, outputs, shown, pair.stamp_ns)
         self._publish_map(slam, outputs, track, shown, pair.stamp_ns)
-
-    def _frame(self, pair: StereoMessages, receiver: Receiver, index: int, track: _Track) -> Frame | None:
-        """The pair as a NeoSLAM frame, or None (counted) when it cannot be mapped yet."""
-        if self._camera is None and not self._calibrate(pair, receiver):
-            return None
-        assert self._camera is not None and self._front_end is not None
-        if not self._move(pair, receiver, track):
-            return None
-        try:
-            left, right = self._camera.grey_pair(pair.left, pair.right)
-        except MessageError as error:
-            self._skip("bad_message", f"a stereo pair at {stamp_seconds(pair.stamp_ns):.3f} s is skipped: {error}")
-            return None
-        return self._front_end.frame(index, stamp_seconds(pair.stamp_ns), left, right)
 
     def _calibrate(self, pair: StereoMessages, receiver: Receiver) -> bool:
         """The stereo calibration from the two CameraInfo messages (once), and the front end for it."""

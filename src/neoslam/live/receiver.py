@@ -25,7 +25,7 @@ from neoslam.geometry import interpolated_pose
 from neoslam.live.camera import COMPRESSED_SUFFIX
 from neoslam.live.conversions import NS_PER_S, stamp_ns
 from neoslam.live.messages import CameraInfo, CompressedImage, Image, Odometry
-from neoslam.live.transport import Ros2Domain, sensor_qos
+from neoslam.live.transport import Ros2Domain, sensor_qos, taken
 
 __all__ = [
     "StereoMessages",
@@ -227,12 +227,10 @@ class Receiver:
         while not self._stopping.is_set():
             self._waitset.wait(wait)
             for role, reader in self._readers.items():
-                for sample in reader.take(N=self.config.sensor_depth * 2):
+                for sample in taken(reader, self.config.sensor_depth * 2):
                     self._receive(role, sample, time.monotonic())
 
     def _receive(self, role: str, sample: Any, now: float) -> None:
-        if not getattr(getattr(sample, "sample_info", None), "valid_data", True):
-            return  # a disposal or unregistration notice, no data
         if role in ("left_info", "right_info"):
             with self._lock:
                 self._infos[role] = sample

@@ -20,7 +20,7 @@ from cyclonedds.util import duration
 
 from neoslam.errors import ConfigError
 from neoslam.live.messages import MESSAGE_TYPES
-from neoslam.live.transport import Publication, Ros2Domain
+from neoslam.live.transport import Publication, Ros2Domain, taken
 
 __all__ = ["RecordReport", "record_topics"]
 
@@ -104,9 +104,7 @@ def _drain_until_stopped(
         waitset.wait(duration(seconds=WAIT_S))
         now = time.monotonic()
         for topic, (reader, connection) in readers.items():
-            for sample in reader.take(N=READER_DEPTH):
-                if not getattr(getattr(sample, "sample_info", None), "valid_data", True):
-                    continue
+            for sample in taken(reader, READER_DEPTH):
                 writer.write(connection, time.time_ns(), bytes(sample.serialize()))
                 report.messages[topic] += 1
                 last = now

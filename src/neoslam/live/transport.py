@@ -39,6 +39,7 @@ __all__ = [
     "map_qos",
     "event_qos",
     "type_hash",
+    "taken",
 ]
 
 ROS_PREFIX = "rt/"  # ROS 2's prefix of DDS topics that carry messages (rq/ and rr/ carry services)
@@ -154,6 +155,12 @@ class Ros2Domain:
         """Delete the participant and everything it made (readers, writers, topics)."""
         with suppress(Exception):  # already deleted
             self.participant.__del__()
+
+
+def taken(reader: Any, most: int) -> list[Any]:
+    """Up to `most` samples taken from a reader, with data: a writer's disposal or unregistration (one that
+    stopped) comes as a sample with no data, and is left out."""
+    return [s for s in reader.take(N=most) if getattr(getattr(s, "sample_info", None), "valid_data", True)]
 
 
 def _participant_of(sample: Any) -> Any:

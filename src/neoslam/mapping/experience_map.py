@@ -29,7 +29,8 @@ built.
 Sessions (beyond the paper, neoslam.store): the map can start from a stored one (`restore`). The session's first
 experience then starts a part of the map of its own, in the session's frame; the first closure with a stored
 keyframe joins the two parts (`join`): the newer part moves rigidly to where the closure puts it in the older's
-frame. The grid-cell check compares experiences of one session only: two sessions' cells started apart.
+frame, and a loop link by that closure makes them one part (whichever way the robot drives the stored street). The
+grid-cell check compares experiences of one session only: two sessions' cells started apart.
 """
 
 from __future__ import annotations
@@ -94,6 +95,7 @@ class ExperienceMap:
         self._merged: dict[int, tuple[int, np.ndarray]] = {}  # recent keyframes merged: (experience, T_exp_robot)
         self._linked: set[tuple[int, int]] = set()  # pairs of experiences with a link, smaller id first
         self._reentered: set[int] = set()  # experiences a closure has re-entered
+        self._joining: set[tuple[int, int]] = set()  # (query, match) keyframes of the closures that joined parts
         self._unoptimised = 0  # links added since the last optimisation
         self._current = -1
         self._current_is_new = False  # whether the current visit made its experience (not yet tied to the map)
@@ -357,6 +359,8 @@ class ExperienceMap:
             return False
         self.accepted_closures.append(closure)
         self._localised_at = self._odometer
+        if (closure.query_keyframe, closure.match_keyframe) in self._joining:
+            return True  # its join linked it (see join): a second link would count the one fit twice
         if query is not None:
             self._link(Link(stored, query, closure.relative_pose, "loop", 0.0))
         else:  # the query keyframe was merged into a stored one: the closure relates two stored experiences
@@ -373,15 +377,23 @@ class ExperienceMap:
         """If a closure's stored keyframe lies in another part of the map than the robot (a stored session, before
         this one relocalised in it), move the newer of the two parts rigidly to where the closure puts it in the
         older one's frame (in all six degrees of freedom: the parts' frames are their sessions' first poses, tilted
-        differently). `query_pose` is the closure's query keyframe pose in the map as it is (the robot's current
-        pose for the current keyframe). Returns whether the robot's own part moved (then its frame is the stored
-        part's)."""
+        differently), and link the robot's current experience to the stored one by the closure: the two parts are
+        one from then on. `query_pose` is the closure's query keyframe pose in the map as it is (the robot's
+        current pose for the current keyframe). Returns whether the robot's own part moved (then its frame is the
+        stored part's).
+
+        The link is what makes the join last. Without it the parts stayed two until a later link tied them, which
+        only re-entering a stored experience did (the robot heading the way the map was made): a robot driving a
+        mapped street the other way stayed a part of its own, so every keyframe that relocalised joined again,
+        moving the whole session by that one fit, and each join (rotations inverted as if orthonormal) doubled
+        their rounding error until they degenerated: headings half a turn off, positions kilometres off."""
         stored = self._by_keyframe.get(closure.match_keyframe)
         if stored is None or self._current < 0:
             return False
         here, there = self.parts.part_of(self.current), self.parts.part_of(stored)
         if here == there:
             return False
+        robot_in_current = invert_pose(self.graph.poses[self.current]) @ query_pose
         robot = self.graph.poses[stored] @ closure.relative_pose  # where the closure puts the robot, there
         moved = robot @ invert_pose(query_pose)  # T_there_here
         moving = here
@@ -389,6 +401,9 @@ class ExperienceMap:
             moved, moving = invert_pose(moved), there
         members = self.parts.members(moving)
         self.graph.poses[members] = moved @ self.graph.poses[members]
+        tie = closure.relative_pose @ invert_pose(robot_in_current)  # T_stored_current
+        self._link(Link(stored, self.current, tie, "loop", 0.0))
+        self._joining.add((closure.query_keyframe, closure.match_keyframe))
         self.backend.rebuild(self.graph)
         return moving == here
 

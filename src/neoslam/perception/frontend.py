@@ -131,7 +131,9 @@ class PerceptionTimes:
         timed = [stage for stage in STAGES if self.stages[stage]]
         if not timed:
             return {}
-        total = np.sum([self.stages[s] for s in timed], axis=0)
+        # A frame stopped between stages (a stop signal while the next was already detected) has no total.
+        complete = min(len(self.stages[s]) for s in timed)
+        total = np.sum([self.stages[s][:complete] for s in timed], axis=0)
         figures = {f"{s}_ms_median": round(float(np.median(self.stages[s])) * 1e3, 2) for s in timed}
         figures["total_ms_median"] = round(float(np.median(total)) * 1e3, 2)
         figures["total_ms_p95"] = round(float(np.percentile(total, 95)) * 1e3, 2)
