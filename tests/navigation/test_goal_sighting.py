@@ -13,7 +13,7 @@ from tests.navigation.streets import ladder
 
 from neoslam.config import NeoSLAMConfig
 from neoslam.geometry import invert_pose, robot_points_to_camera
-from neoslam.navigation.session import SIGHTINGS, GoalGuidance
+from neoslam.navigation.session import GoalGuidance
 from neoslam.types import Frame, MapState, ObjectObservation, SessionRecord
 
 
@@ -60,8 +60,9 @@ def test_an_object_this_session_saw_before_it_relocalised_is_reached_one_it_neve
 
 def test_an_observation_nearer_another_object_of_the_class_is_that_one():
     """A car 3 m from the goal car: its observation, 2.2 m from the goal and 0.8 m from it, is no sighting of the
-    goal (the goal car may have left); one nearer the goal is, once SIGHTINGS frames have it. The robot sees them
-    from the side: a stereo point on the near surface, whose object's middle is half a car's width (0.9 m) farther."""
+    goal (the goal car may have left); one nearer the goal is, once `navigation.sightings` frames have it. The robot
+    sees them from the side: a stereo point on the near surface, whose object's middle is half a car's width (0.9 m)
+    farther."""
     streets = ladder()
     builder = streets.builder
     seen_from = {streets.at(60, 0): 3, streets.at(55, 0): 2}
@@ -72,8 +73,9 @@ def test_an_observation_nearer_another_object_of_the_class_is_that_one():
     for seen, expected in (((60.0, -6.3), "missing"), ((60.0, -4.2), "arrived")):
         guidance = GoalGuidance(f"object {goal}", NeoSLAMConfig())
         states = []
-        for index in range(5, 5 + SIGHTINGS):
+        for index in range(5, 5 + NeoSLAMConfig().navigation.sightings):
             guidance(state, _frame(index, robot, (("car", seen),)), robot)
             assert guidance.latest is not None
             states.append(guidance.latest.state)
-        assert states == ["missing"] * (SIGHTINGS - 1) + [expected]  # a frame alone does not see it
+        needed = NeoSLAMConfig().navigation.sightings
+        assert states == ["missing"] * (needed - 1) + [expected]  # a frame alone does not see it

@@ -13,7 +13,6 @@ from tests.navigation.streets import ladder, pose_at
 from neoslam.config import NavigationConfig
 from neoslam.errors import NoRouteError
 from neoslam.navigation import Guide, RoutePlanner
-from neoslam.navigation.guidance import AT_END_M
 
 CONFIG = NavigationConfig()
 
@@ -49,9 +48,9 @@ def test_waypoints_advance_and_arrival_comes_at_the_route_end_within_the_radius_
     assert waypoints == sorted(waypoints) and waypoints[-1] == len(route) - 1
     assert {r.state for r in records} == {"on_route", "arrived"}
     first = next(i for i, r in enumerate(records) if r.arrived)
-    assert all(r.remaining_m > AT_END_M for r in records[:first])  # inside the radius, short of the end: on
+    assert all(r.remaining_m > CONFIG.end_reached for r in records[:first])  # inside the radius, short of the end: on
     assert any(r.goal_distance_m <= CONFIG.arrival_radius for r in records[:first])
-    assert records[first].goal_distance_m <= CONFIG.arrival_radius and records[first].remaining_m <= AT_END_M
+    assert records[first].goal_distance_m <= CONFIG.arrival_radius and records[first].remaining_m <= CONFIG.end_reached
     assert all(r.arrived and r.state == "arrived" for r in records[first:])
     remaining = [r.remaining_m for r in records]
     assert remaining[0] == pytest.approx(route.length_m, abs=0.01) and remaining[-1] == pytest.approx(0.0, abs=0.01)

@@ -55,6 +55,13 @@ class NavigationConfig(Section):
         description="guidance: the robot has arrived once it has reached the route's end (the goal's position) within "
         "this distance of it, m: how far beside the end it may be",
     )
+    end_reached: float = Field(
+        0.5,
+        gt=0,
+        le=100,
+        description="guidance: a robot projected onto the route this close to its end, along it, has reached the "
+        "end, m: a robot that stops when told it arrived stops there, not on the rim of arrival_radius",
+    )
     look_ahead: float = Field(
         8.0,
         ge=0,
@@ -115,6 +122,20 @@ class NavigationConfig(Section):
         "the map, at the robot's pose) is a sighting of it, m; arriving at an object this session never sighted (in "
         "a frame, or in the map's record of it when the route is planned) is reported missing, not arrived (a "
         "parked car that left)",
+    )
+    sightings: int = Field(
+        2,
+        ge=1,
+        le=100,
+        description="guidance to an object: frames with a sighting that see the goal object (one far observation "
+        "of a neighbour, its stereo depth metres off at 50 m, can land on it)",
+    )
+    rivals_within: float = Field(
+        3.0,
+        gt=0,
+        le=100,
+        description="guidance to an object: the map's other objects of the goal's class within this many "
+        "confirm_radius of it compete for an observation: one nearer to them than to the goal is theirs",
     )
 
     @model_validator(mode="after")

@@ -11,7 +11,7 @@ farther than `off_route_distance` from it, when its pose jumped by more than `ju
 frame (it was relocalised, or the map was corrected), or when it comes back localised off the route; never on other
 frames. A route planned again starts with the straight way from where the robot is to the route's first experience,
 so a robot off the map is planned for again only once it has gone another `off_route_distance` astray. The robot has
-arrived once it has reached the route's end (its projection within AT_END_M of it) within `arrival_radius` of the
+arrived once it has reached the route's end (its projection within `end_reached` of it) within `arrival_radius` of the
 goal's position (the route's end): a robot that stops when told it arrived stops there, not on the rim of the radius
 as it comes near; the radius is how far beside the end it may be (a pose estimate off the route, a goal off the
 links). It stays arrived until `follow` gives it a new route.
@@ -30,13 +30,12 @@ from neoslam.errors import GoalError
 from neoslam.navigation.resolution import ResolvedGoal
 from neoslam.navigation.route import Route
 
-__all__ = ["AT_END_M", "Guidance", "GuidanceState", "Guide", "Replan"]
+__all__ = ["Guidance", "GuidanceState", "Guide", "Replan"]
 
 GuidanceState = Literal["not_localised", "on_route", "off_route", "replanned", "arrived", "unreachable"]
 Replan = Callable[[ResolvedGoal, np.ndarray], Route]  # (goal, position in the map frame) -> a new route to it
 _TINY = 1e-12  # a segment shorter than this (squared, m^2) is a point
 _JOINED_M = 0.01  # a robot this close to a new route's start is on it (no approach segment)
-AT_END_M = 0.5  # a robot projected this close to the route's end (along it) has reached the end
 
 
 @dataclass(frozen=True, slots=True)
@@ -166,7 +165,7 @@ class Guide:
     ) -> Guidance:
         route, config = self._route, self.config
         goal_distance = float(np.hypot(*(pose[:2, 3] - route.goal.position[:2])))
-        at_end = self._along[-1] - self._progress.along_m <= AT_END_M
+        at_end = self._along[-1] - self._progress.along_m <= config.end_reached
         if at_end and goal_distance <= config.arrival_radius:
             self._arrived = True
         ahead = int(np.searchsorted(self._along, self._progress.along_m + config.look_ahead, side="left"))

@@ -12,11 +12,11 @@ An object goal must be seen to be reached: a parked car may have left since the 
 know it until the robot looks. Every frame's observations of the goal's class are placed in the map (the robot's
 pose there, each moved from the surface the camera sees to the object's middle as the map's objects are); one within
 `navigation.confirm_radius` of the goal object, and nearer to it than to any other object of its class in the map,
-is a sighting. SIGHTINGS frames with one see the goal object (a single far observation of a neighbour can land on
-it: stereo depth is metres off at 50 m); so does the map's own record, when the route is planned, that this session
-observed the goal object (before it relocalised, say: the car it has just passed, which a route of a few metres
-reaches before the camera sees it again). Arriving at an object goal this session has not seen is `missing`, not
-`arrived`.
+is a sighting. `navigation.sightings` frames with one see the goal object (a single far observation of a neighbour
+can land on it: stereo depth is metres off at 50 m); so does the map's own record, when the route is planned, that
+this session observed the goal object (before it relocalised, say: the car it has just passed, which a route of a
+few metres reaches before the camera sees it again). Arriving at an object goal this session has not seen is
+`missing`, not `arrived`.
 """
 
 from __future__ import annotations
@@ -36,11 +36,8 @@ from neoslam.navigation.view import pose_in_map
 from neoslam.pipeline import NeoSLAM
 from neoslam.types import Frame
 
-__all__ = ["SIGHTINGS", "GoalGuidance", "GuidanceRecord", "GUIDANCE_COLUMNS"]
+__all__ = ["GoalGuidance", "GuidanceRecord", "GUIDANCE_COLUMNS"]
 
-# Frames that must see an object goal: one observation may be a neighbour's, tens of metres away, its depth metres off.
-SIGHTINGS = 2
-RIVALS_WITHIN = 3.0  # confirm radii: the map's objects of the goal's class this near it compete for an observation
 
 GUIDANCE_COLUMNS = (
     "frame",
@@ -125,7 +122,7 @@ class GoalGuidance:
 
     @property
     def _seen(self) -> bool:
-        return self._sightings >= SIGHTINGS
+        return self._sightings >= self.config.navigation.sightings
 
     @property
     def route(self) -> Route | None:
@@ -188,7 +185,7 @@ class GoalGuidance:
         self._guide = Guide(route, self.config.navigation, replan=self._planner.replan)
         found = route.goal.object
         if found is not None and slam.session.id in found.sessions:  # the map's record: this session saw it
-            self._sightings = SIGHTINGS
+            self._sightings = self.config.navigation.sightings
         self._rivals = self._rivals_of(route) if found is not None else np.zeros((0, 2))
         self.events.planned = frame_index
         self.events.first_route_m = route.length_m
@@ -199,13 +196,14 @@ class GoalGuidance:
         return route is not None and route.goal.kind == "object"
 
     def _rivals_of(self, route: Route) -> np.ndarray:
-        """(k, 2) the positions of the map's other objects of the goal object's class within RIVALS_WITHIN
+        """(k, 2) the positions of the map's other objects of the goal object's class within `rivals_within`
         confirm radii of it."""
         assert self._planner is not None and route.goal.object is not None
         found, objects = route.goal.object, self._planner.objects()
         others = (objects.labels == found.label) & (objects.ids != found.id)
         positions = objects.positions[others, :2]
-        near = np.hypot(*(positions - found.position[:2]).T) <= RIVALS_WITHIN * self.config.navigation.confirm_radius
+        navigation = self.config.navigation
+        near = np.hypot(*(positions - found.position[:2]).T) <= navigation.rivals_within * navigation.confirm_radius
         return positions[near]
 
     def _sighted(self, frame: Frame, pose: np.ndarray) -> bool:
