@@ -13,7 +13,8 @@ taken out of the world before the robot starts.
 frame, its odometry is the true motion with the per-step noise of the `vo` profile (neoslam.sim.odometry.noisy_step),
 its observations the world's objects detected from where it truly is (DetectionSimulator, converted as the dataset
 reader converts them: neoslam.datasets.simulated.simulated_observations), then `slam.step(frame)` and the guidance.
-It ends when the guidance says `arrived`, `missing` or `unreachable`, or at the frame limit (a timeout): three
+At an object goal it has not seen, the guidance says `looking` and the robot turns in place to the object. It ends
+when the guidance says `arrived`, `missing` or `unreachable`, or at the frame limit (a timeout): three
 times the true shortest street path from the start to the goal plus EXPLORE_BUDGET_M, at the step of a frame.
 Judging is benchmarks._judging's.
 """
@@ -26,7 +27,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from benchmarks._delivery_maps import MappedDrive
-from benchmarks._robot import STOPPING, Robot, choose_next
+from benchmarks._robot import LOOKING, STOPPING, Robot, choose_next
 from neoslam.datasets.simulated import simulated_observations
 from neoslam.geometry import integrate_body_velocities
 from neoslam.navigation.session import GoalGuidance
@@ -203,10 +204,15 @@ def run_delivery(mapped: MappedDrive, plan: DeliveryPlan) -> Delivery:
 
     for index in range(limit):
         if index:
-            if guidance.latest is not None and guidance.latest.state in STOPPING:
+            latest = guidance.latest
+            if latest is not None and latest.state in STOPPING:
                 break
             previous = pose
-            driven.append(driven[-1] + robot.drive(step_m, dt, choose))
+            if latest is not None and latest.state == LOOKING and latest.guidance is not None:
+                robot.look(robot.yaw + (latest.guidance.bearing_rad or 0.0), dt)
+                driven.append(driven[-1])
+            else:
+                driven.append(driven[-1] + robot.drive(step_m, dt, choose))
             pose = robot.pose()
             linear, angular = noisy_step(previous, pose, dt, simulator.odometry, odometry_rng)
             odometry = _integrated(odometry, linear, angular, dt)

@@ -9,8 +9,9 @@ The controller (`choose_next`) reads only the guidance of the last frame: before
 (drives on along the street; where the street forks, a seeded choice, never back where it came from unless it is a
 dead end); once a route is planned it takes the edge whose direction, in the world, best matches the guidance's
 bearing to the next waypoint turned into the world by the robot's true heading (the bearing is in the robot's frame:
-no map knowledge is needed to follow it), and turns round only for a waypoint nearly behind it. `arrived`, `missing`
-and `unreachable` stop the robot.
+no map knowledge is needed to follow it), and turns round only for a waypoint nearly behind it. `looking` (at an
+object goal not yet seen) turns it in place towards the guidance's bearing, as a robot turns its camera to the
+object. `arrived`, `missing` and `unreachable` stop the robot.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from benchmarks._street_graph import StreetGraph
 
 __all__ = [
     "FOLLOWING",
+    "LOOKING",
     "MAX_YAW_RATE",
     "SNAP_TURN_RAD",
     "STOPPING",
@@ -39,6 +41,7 @@ SNAP_TURN_RAD = np.radians(25.0)  # a turn at a node up to this is taken while d
 MAX_YAW_RATE = np.radians(90.0)  # rad/s of a turn in place (a U-turn takes two seconds)
 U_TURN_CONE_RAD = np.radians(60.0)  # the robot turns round only for a waypoint this close to straight behind it
 STOPPING = frozenset({"arrived", "missing", "unreachable"})  # the guidance states that end a delivery
+LOOKING = "looking"  # the guidance state that turns the robot in place towards its bearing
 FOLLOWING = frozenset({"on_route", "replanned", "off_route"})  # the states with a bearing to follow
 
 Chooser = Callable[[int, int, float], int]  # (node reached, node came from, true yaw) -> next node
@@ -99,6 +102,14 @@ class Robot:
             if not self._next_edge(choose(self.target, self.source, self.yaw)):
                 return driven  # a sharp turn: it goes on from the node in the next frames
         return driven
+
+    def look(self, direction: float, dt: float) -> None:
+        """One frame turning in place towards `direction` (world yaw, rad) at MAX_YAW_RATE; before it drives on, it
+        turns back onto its edge."""
+        turn = _wrap(direction - self.yaw)
+        largest = MAX_YAW_RATE * dt
+        self.yaw = direction if abs(turn) <= largest else _wrap(self.yaw + np.sign(turn) * largest)
+        self.turning = True
 
     def _next_edge(self, following: int) -> bool:
         """Onto the edge from the node reached to `following`; False when that needs a turn in place first."""

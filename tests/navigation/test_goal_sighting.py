@@ -1,6 +1,7 @@
 """An object goal is reached only once the running session has seen it: in a frame since the route was planned (an
-observation nearer to it than to another object of its class), or in the map's own record of the object when the
-route is planned (the session's observations joined it before it relocalised). A hand-built map stands in for the
+observation nearer to it than to another object of its class), in the map's own record of the object when the
+route is planned (the session's observations joined it before it relocalised), or in the frames just before it
+relocalised. Reached unseen, it is looked at for a while, then reported missing. A hand-built map stands in for the
 running system: GoalGuidance reads its session and plans on it."""
 
 from __future__ import annotations
@@ -50,12 +51,63 @@ def test_an_object_this_session_saw_before_it_relocalised_is_reached_one_it_neve
     seen_before = builder.add_object("car", (60, -5, 0.5), {streets.at(60, 0): 3, streets.at(55, 0): 2})
     state = _running(builder.state())
     config = NeoSLAMConfig()
-    for goal, expected in ((seen_now, "arrived"), (seen_before, "missing")):
+    for goal, expected in ((seen_now, "arrived"), (seen_before, "looking")):
         robot = state.experience_poses[streets.at(150 if goal == seen_now else 60, 0)]  # at the goal: no frame sees it
         guidance = GoalGuidance(f"object {goal}", config)
         guidance(state, _frame(5), robot)
         assert guidance.latest is not None and guidance.latest.state == expected
         assert guidance.summary()["goal_seen"] is (expected == "arrived")
+    looked = round(config.navigation.look_time / 0.1)  # frames of _frame's 0.1 s
+    for index, expected in ((5 + looked - 1, "looking"), (5 + looked, "missing")):
+        guidance(state, _frame(index), robot)
+        assert guidance.latest is not None and guidance.latest.state == expected
+
+
+def test_a_robot_at_an_object_it_has_not_seen_is_turned_to_it_and_arrives_once_it_sees_it():
+    """Reached unseen, the goal is looked at: the bearing and distance are to the object (5 m to the right of a
+    robot facing along x), not to the route's end; frames that then see it make the robot arrive."""
+    streets = ladder()
+    goal = streets.builder.add_object("car", (60, -5, 0.5), {streets.at(60, 0): 3, streets.at(55, 0): 2})
+    state = _running(streets.builder.state())
+    robot = state.experience_poses[streets.at(60, 0)]
+    guidance = GoalGuidance(f"object {goal}", NeoSLAMConfig())
+    guidance(state, _frame(5), robot)
+    looking = guidance.latest
+    assert looking is not None and looking.state == "looking" and looking.guidance is not None
+    assert np.isclose(np.degrees(looking.guidance.bearing_rad), -90.0, atol=1.0)
+    assert np.isclose(looking.guidance.distance_m, 5.0, atol=0.5)
+    assert looking.row()["bearing_deg"] == looking.guidance.bearing_rad * 180 / np.pi
+    needed = NeoSLAMConfig().navigation.sightings
+    for index in range(6, 6 + needed):
+        guidance(state, _frame(index, robot, (("car", (60.0, -4.2)),)), robot)
+    assert guidance.latest is not None and guidance.latest.state == "arrived"
+    assert guidance.summary()["arrived_frame"] == 5 + needed
+
+
+def test_frames_before_the_session_relocalised_that_saw_the_goal_count_once_it_has():
+    """A robot that passed the goal car just before it relocalised has seen it: those frames' observations, kept in
+    the odometry's frame, are placed in the map once the session is in it (here the odometry's frame is 20 m
+    behind the map's along x) and count as sightings; beyond recall_frames they are forgotten."""
+    streets = ladder()
+    goal = streets.builder.add_object("car", (60, -5, 0.5), {streets.at(60, 0): 3, streets.at(55, 0): 2})
+    lost = _running(streets.builder.state())
+    lost.session = SessionRecord(2, "later", 10, None)
+    found = _running(streets.builder.state())
+    robot = found.experience_poses[streets.at(60, 0)]
+    odometry = robot.copy()
+    odometry[0, 3] -= 20.0  # the same robot in the odometry's frame
+    for recall, expected in ((100, "arrived"), (3, "looking")):
+        config = NeoSLAMConfig.model_validate({"navigation": {"recall_frames": recall}})
+        guidance = GoalGuidance(f"object {goal}", config)
+        needed = config.navigation.sightings
+        for index in range(needed):  # seen from where the map has the robot, said in the odometry's frame
+            frame = _frame(index, robot, (("car", (60.0, -4.2)),))
+            guidance(lost, dataclasses.replace(frame, odometry_pose=odometry), odometry)
+            assert guidance.latest is not None and guidance.latest.state == "not_localised"
+        for index in range(needed, needed + 3):  # nothing in view
+            guidance(lost, dataclasses.replace(_frame(index), odometry_pose=odometry), odometry)
+        guidance(found, dataclasses.replace(_frame(needed + 3), odometry_pose=odometry), robot)
+        assert guidance.latest is not None and guidance.latest.state == expected
 
 
 def test_an_observation_nearer_another_object_of_the_class_is_that_one():
@@ -70,7 +122,7 @@ def test_an_observation_nearer_another_object_of_the_class_is_that_one():
     builder.add_object("car", (60, -8, 0.5), seen_from)
     state = _running(builder.state())
     robot = state.experience_poses[streets.at(60, 0)]
-    for seen, expected in (((60.0, -6.3), "missing"), ((60.0, -4.2), "arrived")):
+    for seen, expected in (((60.0, -6.3), "looking"), ((60.0, -4.2), "arrived")):
         guidance = GoalGuidance(f"object {goal}", NeoSLAMConfig())
         states = []
         for index in range(5, 5 + NeoSLAMConfig().navigation.sightings):
@@ -78,4 +130,4 @@ def test_an_observation_nearer_another_object_of_the_class_is_that_one():
             assert guidance.latest is not None
             states.append(guidance.latest.state)
         needed = NeoSLAMConfig().navigation.sightings
-        assert states == ["missing"] * (needed - 1) + [expected]  # a frame alone does not see it
+        assert states == ["looking"] * (needed - 1) + [expected]  # a frame alone does not see it

@@ -169,3 +169,31 @@ def test_a_robot_off_the_route_joins_the_map_ahead_not_where_it_was_nearest(plan
     again = planner.replan(route.goal, np.array([122.0, -8.0, 0.0]))
     assert planner.graph.positions[again.start, :2].tolist() == [115.0, 0.0]
     assert again.experiences[-1] == route.goal.experience and again.length_m == pytest.approx(115.0)
+
+
+def test_a_point_off_the_route_is_followed_on_to_and_a_robot_passing_beside_it_arrives_abeam():
+    """A point goal 3 m off the north street: the route ends at an experience near it, and the guidance leaves the
+    street where it passes nearest the point (62, 50) and goes on to the point itself (the last waypoint, no
+    experience). A robot driving west along the street, 0.5 m beside it, comes no nearer the point than 2.5 m and
+    its projection never reaches it: it arrives once the point is abeam, not before; one driven to the point
+    arrives there."""
+    streets = ladder()
+    planner = RoutePlanner(streets.state)
+    point = np.array([62.0, 53.0])
+    route = planner.plan(f"{point[0]},{point[1]}", start=streets.at(150, 0))
+    assert 1.0 < np.hypot(*(point - route.positions[-1][:2])) <= CONFIG.goal_radius
+    leaving = Guide(route, CONFIG).update(pose_at(62.0, 50.0, np.pi / 2))
+    assert leaving.state == "on_route" and leaving.waypoint == len(route) and leaving.experience is None
+    assert np.allclose(leaving.waypoint_position[:2], point) and leaving.remaining_m == pytest.approx(3.0)
+    assert leaving.bearing_rad == pytest.approx(0.0, abs=1e-9)
+
+    beside = Guide(route, CONFIG)
+    states = {x: beside.update(pose_at(x, 50.5, np.pi)).state for x in np.arange(80.0, 55.0, -0.5)}
+    first = max(x for x, state in states.items() if state == "arrived")
+    assert point[0] - 0.5 <= first <= point[0] + 1e-9
+    assert all(state == "on_route" for x, state in states.items() if x > first)
+
+    driven = Guide(route, CONFIG)
+    driven.update(pose_at(62.0, 50.0, np.pi / 2))
+    arrived = driven.update(pose_at(*point, np.pi / 2))
+    assert arrived.state == "arrived" and arrived.goal_distance_m == pytest.approx(0.0)

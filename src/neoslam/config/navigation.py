@@ -130,6 +130,22 @@ class NavigationConfig(Section):
         description="guidance to an object: frames with a sighting that see the goal object (one far observation "
         "of a neighbour, its stereo depth metres off at 50 m, can land on it)",
     )
+    recall_frames: int = Field(
+        100,
+        ge=0,
+        le=100_000,
+        description="guidance to an object: the frames before the session relocalised whose observations count as "
+        "sightings once it has (placed by the odometry since: 100 frames, 10 s at 10 Hz); a robot that passed the "
+        "goal just before it relocalised has seen it",
+    )
+    look_time: float = Field(
+        4.0,
+        ge=0,
+        le=3600,
+        description="guidance to an object: a robot that reaches an object goal it has not sighted is asked to look "
+        "at it (state looking, the bearing to the object) for up to this long before it is reported missing, s "
+        "(a U-turn in place takes about 2 s; 0: missing at once)",
+    )
     rivals_within: float = Field(
         3.0,
         gt=0,

@@ -10,11 +10,13 @@ route is planned again to the same goal (RoutePlanner.replan: from where the rob
 farther than `off_route_distance` from it, when its pose jumped by more than `jump_distance` since the previous
 frame (it was relocalised, or the map was corrected), or when it comes back localised off the route; never on other
 frames. A route planned again starts with the straight way from where the robot is to the route's first experience,
-so a robot off the map is planned for again only once it has gone another `off_route_distance` astray. The robot has
-arrived once it has reached the route's end (its projection within `end_reached` of it) within `arrival_radius` of the
-goal's position (the route's end): a robot that stops when told it arrived stops there, not on the rim of the radius
-as it comes near; the radius is how far beside the end it may be (a pose estimate off the route, a goal off the
-links). It stays arrived until `follow` gives it a new route.
+so a robot off the map is planned for again only once it has gone another `off_route_distance` astray. A point goal
+off the route's last experience, within `goal_radius` of it, is followed on to in a straight last leg: the point is
+then the route's end. The robot has arrived once it has reached the route's end within `arrival_radius` of it: its
+projection is within `end_reached` of the end, or within `arrival_radius` of it with the end abeam or behind the robot
+(a pose estimate beside the route passes the end without its projection reaching it). A robot that stops when told
+it arrived stops there, not on the rim of the radius as it comes near; the radius is how far beside the end it may
+be (a pose estimate off the route, a goal off the links). It stays arrived until `follow` gives it a new route.
 """
 
 from __future__ import annotations
@@ -48,13 +50,13 @@ class Guidance:
 
     state: GuidanceState
     route: Route | None  # the route followed (a new one after a re-plan)
-    waypoint: int | None = None  # index of the next waypoint in route.experiences
-    experience: int | None = None  # its experience
+    waypoint: int | None = None  # index of the next waypoint in route.experiences (len(route): a point goal's own)
+    experience: int | None = None  # its experience (None: a point goal's own position, beyond the route's end)
     waypoint_position: np.ndarray | None = None  # (3,) map frame
     distance_m: float | None = None  # to the waypoint
     bearing_rad: float | None = None  # to the waypoint
     remaining_m: float | None = None  # along the route from the robot's projection to its end (and its approach)
-    goal_distance_m: float | None = None  # straight to the goal's position
+    goal_distance_m: float | None = None  # straight to where the robot is guided (the route's end or the point)
     off_route_m: float | None = None  # from the route
     arrived: bool = False
     reason: Literal["off_route", "relocalised"] | None = None  # why a replanned route was planned
@@ -87,19 +89,40 @@ class Guide:
         start (a re-plan from a place the map does not hold): the way from there to the route's start is followed
         as its first segment, so the robot is on it."""
         self._route = route
-        points = np.asarray(route.positions[:, :2], dtype=float)
+        points = np.asarray(route.positions, dtype=float)
         along = np.asarray(route.along_m, dtype=float)
+        index = np.arange(len(route))  # each internal point's waypoint in the route; -1: none (a point of its own)
+        finish = self._finish_of(route)
+        if finish is not None:
+            points, along, index = _leg_to(finish, points, along, index, self.config.goal_radius)
         self._offset = 0  # internal points before the route's first waypoint
-        if origin is not None and np.hypot(*(points[0] - origin[:2])) > _JOINED_M:
-            approach = float(np.hypot(*(points[0] - origin[:2])))
-            points = np.concatenate([np.asarray(origin[:2], dtype=float)[None], points])
+        if origin is not None and np.hypot(*(points[0, :2] - origin[:2])) > _JOINED_M:
+            approach = float(np.hypot(*(points[0, :2] - origin[:2])))
+            points = np.concatenate([[[origin[0], origin[1], points[0, 2]]], points])
             along = np.concatenate([[0.0], along + approach])
+            index = np.concatenate([[-1], index])
             self._offset = 1
-        self._points, self._along = np.ascontiguousarray(points), along
+        self._points = np.ascontiguousarray(points[:, :2])
+        self._positions, self._along, self._index = points, along, index
         self._progress = _Progress(waypoint=self._offset)
         self._previous: np.ndarray | None = None  # the last localised position (ground plane)
         self._arrived = False
         self._failed_at: np.ndarray | None = None  # where the last re-plan found no route
+
+    def _finish_of(self, route: Route) -> np.ndarray | None:
+        """A point goal's own position, when it lies off the route's last experience within `goal_radius` of it:
+        the route goes on to it (the experience may be half the spacing of experiences away, or past it). An object
+        is beside the street, not on it: the route ends at the experience it is reached from."""
+        goal = route.goal
+        gap = goal.offset_m if goal.kind == "point" else 0.0
+        if gap <= _JOINED_M or gap > self.config.goal_radius:
+            return None
+        return np.asarray(goal.target, dtype=float)
+
+    @property
+    def _goal(self) -> np.ndarray:
+        """(3,) where the robot is guided to: the route's end, or a point goal's own position."""
+        return self._positions[-1]
 
     def update(self, pose: np.ndarray | None) -> Guidance:
         """Guidance for the robot at `pose` (T_map_robot, 4x4, map frame), or None when it is not localised."""
@@ -156,6 +179,16 @@ class Guide:
         distance_along = along[segment] + t[nearest] * (along[segment + 1] - along[segment])
         return float(gaps[nearest]), segment, float(distance_along)
 
+    def _at_end(self, pose: np.ndarray) -> bool:
+        """Whether the robot has reached the route's end: projected within `end_reached` of it, or within
+        `arrival_radius` of it along the route with the end abeam or behind (it passes the end beside the route, a
+        pose estimate off the links, and comes no nearer by driving on)."""
+        left = self._along[-1] - self._progress.along_m
+        if left <= self.config.end_reached:
+            return True
+        ahead = float(pose[:3, 0] @ (self._goal - pose[:3, 3]))  # along the robot's x axis (REP-103: forward)
+        return left <= self.config.arrival_radius and ahead <= 0.0
+
     def _guidance(
         self,
         pose: np.ndarray,
@@ -164,21 +197,21 @@ class Guide:
         reason: Literal["off_route", "relocalised"] | None = None,
     ) -> Guidance:
         route, config = self._route, self.config
-        goal_distance = float(np.hypot(*(pose[:2, 3] - route.goal.position[:2])))
-        at_end = self._along[-1] - self._progress.along_m <= config.end_reached
-        if at_end and goal_distance <= config.arrival_radius:
+        goal_distance = float(np.hypot(*(pose[:2, 3] - self._goal[:2])))
+        if goal_distance <= config.arrival_radius and self._at_end(pose):
             self._arrived = True
         ahead = int(np.searchsorted(self._along, self._progress.along_m + config.look_ahead, side="left"))
         point = max(self._progress.waypoint, min(ahead, len(self._along) - 1))  # an internal point: a waypoint
         self._progress.waypoint = point
-        waypoint = point - self._offset
-        target = route.positions[waypoint]
+        waypoint = int(self._index[point])
+        on_route = waypoint >= 0
+        target = self._positions[point]
         in_robot = pose[:3, :3].T @ (target - pose[:3, 3])
         return Guidance(
             state="arrived" if self._arrived else state,
             route=route,
-            waypoint=waypoint,
-            experience=int(route.experiences[waypoint]),
+            waypoint=waypoint if on_route else len(route),
+            experience=int(route.experiences[waypoint]) if on_route else None,
             waypoint_position=target,
             distance_m=float(np.hypot(*(target[:2] - pose[:2, 3]))),
             bearing_rad=float(np.arctan2(in_robot[1], in_robot[0])),
@@ -188,3 +221,27 @@ class Guide:
             arrived=self._arrived,
             reason=reason,
         )
+
+
+def _leg_to(
+    finish: np.ndarray, points: np.ndarray, along: np.ndarray, index: np.ndarray, within: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The route's points (n, 3), distances along it and waypoint indices, cut where its last `within` metres pass
+    nearest to `finish` and going on from there straight to it: a route that passes beside a point goal to end at
+    an experience beyond it does not drive past the point and back."""
+    cut, at, along_at, gap = len(points) - 1, points[-1], float(along[-1]), np.inf
+    first = max(int(np.searchsorted(along, along[-1] - within, side="left")) - 1, 0)
+    for k in range(first, len(points) - 1):  # a few segments: experiences are metres apart
+        step = points[k + 1] - points[k]
+        squared = float(step[:2] @ step[:2])
+        t = float(np.clip((finish[:2] - points[k, :2]) @ step[:2] / max(squared, _TINY), 0.0, 1.0))
+        here = points[k] + t * step
+        distance = float(np.hypot(*(here[:2] - finish[:2])))
+        if distance <= gap:  # the later of equals: the route's end when it is as near
+            cut, at, along_at, gap = k, here, float(along[k] + t * (along[k + 1] - along[k])), distance
+    kept = slice(0, cut + 1)
+    points, along, index = points[kept], along[kept], index[kept]
+    if np.hypot(*(at[:2] - points[-1, :2])) > _JOINED_M:  # cut inside a segment: its own point
+        points, along, index = np.concatenate([points, at[None]]), np.append(along, along_at), np.append(index, -1)
+    leg = float(np.hypot(*(finish[:2] - points[-1, :2])))
+    return np.concatenate([points, finish[None, :3]]), np.append(along, along[-1] + leg), np.append(index, -1)

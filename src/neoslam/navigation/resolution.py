@@ -41,8 +41,8 @@ LEG_WEIGHT = 10.0
 @dataclass(frozen=True)
 class ResolvedGoal:
     """A goal as the map resolved it. `position` is where the route ends (its last experience's corrected
-    position, which guidance's arrival radius is measured from); `target` what the goal stands for (the object, the
-    point, or the experience itself)."""
+    position; guidance goes on from it to a point goal's target within goal_radius of it); `target` what the goal
+    stands for (the object, the point, or the experience itself)."""
 
     kind: GoalKind
     text: str  # the goal as asked, in its canonical form

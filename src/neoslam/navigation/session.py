@@ -15,13 +15,16 @@ pose there, each moved from the surface the camera sees to the object's middle a
 is a sighting. `navigation.sightings` frames with one see the goal object (a single far observation of a neighbour
 can land on it: stereo depth is metres off at 50 m); so does the map's own record, when the route is planned, that
 this session observed the goal object (before it relocalised, say: the car it has just passed, which a route of a
-few metres reaches before the camera sees it again). Arriving at an object goal this session has not seen is
-`missing`, not `arrived`.
+few metres reaches before the camera sees it again); so do the last `navigation.recall_frames` frames before the
+session relocalised, placed in the map by the odometry from them once it has. A robot that reaches an object goal this session has not seen
+is asked to look at it (`looking`: the bearing and distance are to the object, for a robot to turn to it) for up to
+`navigation.look_time` seconds: the object seen then, it has `arrived`; not seen, it is `missing` (the car has left).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -57,10 +60,11 @@ GUIDANCE_COLUMNS = (
 @dataclass(frozen=True, slots=True)
 class GuidanceRecord:
     """One frame's guidance as a run reports it: the guide's record and what the session adds (the frame, an object
-    goal's sighting, `missing` when an object goal was reached unseen, and why a goal is unreachable)."""
+    goal's sighting, `looking` and then `missing` when an object goal was reached unseen, and why a goal is
+    unreachable)."""
 
     frame: int
-    state: str  # Guidance's states, and `missing`
+    state: str  # Guidance's states, `looking` and `missing`
     guidance: Guidance | None
     goal_seen: bool = False
     reason: str | None = None
@@ -84,6 +88,23 @@ class GuidanceRecord:
         }
 
 
+@dataclass(frozen=True, slots=True)
+class _Recalled:
+    """A frame's observed objects, kept until the session is in the map's frame: their middles in the robot frame (as
+    the map places objects: stereo points lie on the surface facing the camera) and the odometry pose then."""
+
+    odometry_pose: np.ndarray  # (4, 4)
+    labels: tuple[str, ...]
+    centres: np.ndarray  # (k, 3) robot frame
+
+    @classmethod
+    def of(cls, frame: Frame, config: NeoSLAMConfig) -> _Recalled:
+        if not frame.observations:
+            return cls(frame.odometry_pose, (), np.zeros((0, 3)))
+        centres = camera_points_to_robot(object_centres(frame.observations, config.keyframes.footprints))
+        return cls(frame.odometry_pose, tuple(o.label for o in frame.observations), centres)
+
+
 @dataclass
 class _Events:
     """When the guidance reached its milestones (frame numbers), and how often it planned again."""
@@ -91,6 +112,7 @@ class _Events:
     localised: int | None = None
     planned: int | None = None
     arrived: int | None = None
+    looking_since: float | None = None  # the time the robot reached an object goal it had not seen
     replans: int = 0
     first_route_m: float | None = None
 
@@ -119,6 +141,7 @@ class GoalGuidance:
         self._guide: Guide | None = None
         self._sightings = 0  # frames since the route was planned that saw the goal object
         self._rivals = np.zeros((0, 2))  # the map's other objects of the goal's class near it (ground plane)
+        self._recalled: deque[_Recalled] = deque(maxlen=config.navigation.recall_frames)  # before relocalising
 
     @property
     def _seen(self) -> bool:
@@ -138,24 +161,42 @@ class GoalGuidance:
         """The guidance of one frame, after `slam.step(frame)` returned `pose`."""
         in_map = pose_in_map(slam, pose)
         if in_map is None:
+            self._remember(frame)
             return GuidanceRecord(frame.index, "not_localised", None)
         if self.events.localised is None:
             self.events.localised = frame.index
         if self.error is not None:
             return GuidanceRecord(frame.index, "unreachable", None, reason=self.error)
-        if self._guide is None and not self._plan(slam, in_map, frame.index):
+        if self._guide is None and not self._plan(slam, in_map, frame):
             return GuidanceRecord(frame.index, "unreachable", None, reason=self.error)
         assert self._guide is not None
         guidance = self._guide.update(in_map)
         if guidance.state == "replanned":
             self.events.replans += 1
         self._sightings += self._sighted(frame, in_map)
-        state = guidance.state
         if guidance.arrived and self._is_object_goal() and not self._seen:
-            state = "missing"
-        elif guidance.arrived and self.events.arrived is None:
+            return self._looking(frame, in_map, guidance)
+        if guidance.arrived and self.events.arrived is None:
             self.events.arrived = frame.index
-        return GuidanceRecord(frame.index, state, guidance, self._seen)
+        return GuidanceRecord(frame.index, guidance.state, guidance, self._seen)
+
+    def _looking(self, frame: Frame, pose: np.ndarray, guidance: Guidance) -> GuidanceRecord:
+        """At an object goal not yet seen: the bearing to the object, to look at it, until look_time has passed."""
+        if self.events.looking_since is None:
+            self.events.looking_since = frame.timestamp
+        if frame.timestamp - self.events.looking_since >= self.config.navigation.look_time:
+            return GuidanceRecord(frame.index, "missing", guidance, False)
+        route = self.route
+        assert route is not None
+        target = np.asarray(route.goal.target, dtype=float)
+        in_robot = pose[:3, :3].T @ (target - pose[:3, 3])
+        towards = replace(
+            guidance,
+            waypoint_position=target,
+            distance_m=float(np.hypot(*(target[:2] - pose[:2, 3]))),
+            bearing_rad=float(np.arctan2(in_robot[1], in_robot[0])),
+        )
+        return GuidanceRecord(frame.index, "looking", towards, False)
 
     def summary(self) -> dict[str, object]:
         """The guidance's figures for a run's metrics."""
@@ -174,7 +215,7 @@ class GoalGuidance:
             "goal_seen": self._seen,
         }
 
-    def _plan(self, slam: NeoSLAM, pose: np.ndarray, frame_index: int) -> bool:
+    def _plan(self, slam: NeoSLAM, pose: np.ndarray, frame: Frame) -> bool:
         """The first route, from where the robot is; False (and `error`) when the goal cannot be reached."""
         try:
             self._planner = RoutePlanner(slam, self.config)
@@ -184,10 +225,11 @@ class GoalGuidance:
             return False
         self._guide = Guide(route, self.config.navigation, replan=self._planner.replan)
         found = route.goal.object
+        self._rivals = self._rivals_of(route) if found is not None else np.zeros((0, 2))
         if found is not None and slam.session.id in found.sessions:  # the map's record: this session saw it
             self._sightings = self.config.navigation.sightings
-        self._rivals = self._rivals_of(route) if found is not None else np.zeros((0, 2))
-        self.events.planned = frame_index
+        self._sightings += self._recall(frame, pose)
+        self.events.planned = frame.index
         self.events.first_route_m = route.length_m
         return True
 
@@ -206,20 +248,39 @@ class GoalGuidance:
         near = np.hypot(*(positions - found.position[:2]).T) <= navigation.rivals_within * navigation.confirm_radius
         return positions[near]
 
+    def _remember(self, frame: Frame) -> None:
+        """Keep a frame's observations from before the session relocalised (the last `recall_frames`)."""
+        self._recalled.append(_Recalled.of(frame, self.config))
+
+    def _recall(self, frame: Frame, pose: np.ndarray) -> int:
+        """The frames before the session relocalised that saw the goal object, placed in the map by the odometry
+        from them to this frame (`pose`, the first in the map's frame)."""
+        to_map = pose @ np.linalg.inv(frame.odometry_pose)  # T_map_odometry
+        found = 0
+        for seen in self._recalled:
+            found += self._sees(seen.labels, to_map @ seen.odometry_pose, seen.centres)
+        self._recalled.clear()
+        return found
+
     def _sighted(self, frame: Frame, pose: np.ndarray) -> bool:
-        """Whether the frame saw the goal object: an observation of its class within confirm_radius of it and nearer
-        to it than to any other object of its class in the map (a neighbour's observation, off by its measurement
-        and the map's error, is the neighbour's)."""
+        """Whether the frame (its robot at `pose` in the map) saw the goal object."""
+        if not frame.observations or not self._is_object_goal():
+            return False
+        seen = _Recalled.of(frame, self.config)
+        return self._sees(seen.labels, pose, seen.centres)
+
+    def _sees(self, labels: tuple[str, ...], pose: np.ndarray, centres: np.ndarray) -> bool:
+        """Whether objects at `centres` (robot frame, each the middle of an observed object of its label), seen from
+        `pose` in the map, include the goal object: one of its class within confirm_radius of it and nearer to it
+        than to any other object of its class in the map (a neighbour's observation, off by its measurement and the
+        map's error, is the neighbour's)."""
         route = self.route
-        if route is None or route.goal.kind != "object" or route.goal.object is None or not frame.observations:
+        if route is None or route.goal.kind != "object" or route.goal.object is None:
             return False
-        label = route.goal.object.label
-        seen = tuple(o for o in frame.observations if o.label == label)
-        if not seen:
+        mine = np.array([label == route.goal.object.label for label in labels], dtype=bool)
+        if not mine.any():
             return False
-        # the object's middle, as the map places it: stereo points lie on the surface facing the camera
-        in_robot = camera_points_to_robot(object_centres(seen, self.config.keyframes.footprints))
-        in_map = in_robot @ pose[:3, :3].T + pose[:3, 3]
+        in_map = centres[mine] @ pose[:3, :3].T + pose[:3, 3]
         gaps = np.hypot(*(in_map[:, :2] - route.goal.target[:2]).T)
         theirs = np.full(len(gaps), np.inf)
         if len(self._rivals):
