@@ -16,9 +16,10 @@ is a sighting. `navigation.sightings` frames with one see the goal object (a sin
 can land on it: stereo depth is metres off at 50 m); so does the map's own record, when the route is planned, that
 this session observed the goal object (before it relocalised, say: the car it has just passed, which a route of a
 few metres reaches before the camera sees it again); so do the last `navigation.recall_frames` frames before the
-session relocalised, placed in the map by the odometry from them once it has. A robot that reaches an object goal this session has not seen
-is asked to look at it (`looking`: the bearing and distance are to the object, for a robot to turn to it) for up to
-`navigation.look_time` seconds: the object seen then, it has `arrived`; not seen, it is `missing` (the car has left).
+session relocalised, placed in the map by the odometry from them once it has. A robot that reaches an object goal
+this session has not seen is asked to look at it (`looking`: the bearing and distance are to the object, for a
+robot to turn to it) for up to `navigation.look_time` seconds: the object seen then, it has `arrived`; not seen, it
+is `missing` (the car has left).
 """
 
 from __future__ import annotations
