@@ -138,3 +138,27 @@ def test_the_benchmarks_are_the_documented_ones() -> None:
     readme = (harness.REPO_ROOT / "benchmarks" / "README.md").read_text()
     for name in harness.benchmark_names():
         assert f"`{name}`" in readme, f"benchmarks/README.md does not describe {name}"
+
+
+def test_the_renderer_draws_the_marked_figures_from_the_stored_result(tmp_path: Path) -> None:
+    """A figure marker becomes the figure's image, drawn from the stored table into figures/ as SVG; the same result
+    draws the same bytes, so --check then finds nothing stale; a figure the renderer does not know is one line."""
+    pages, results = tmp_path / "pages", tmp_path / "results"
+    pages.mkdir()
+    results.mkdir()
+    rows = [{"experiences": n, "plan_ms_median": n / 5000, "plan_ms_p95": n / 4000, "graph_ms": n / 300}
+            for n in (1000, 5000, 20000)]  # fmt: skip
+    stored = {"benchmark": "navigation", "command": "python -m benchmarks.navigation", "started": "2026-01-02T03:04",
+              "tables": {"planning": {"title": "", "columns": list(rows[0]), "rows": rows}}}  # fmt: skip
+    (results / "navigation.json").write_text(json.dumps(stored))
+    page = pages / "navigation.md"
+    page.write_text("Prose.\n\n<!-- figure: navigation planning -->\nold\n<!-- end figure -->\n")
+    arguments = ["--pages", str(pages), "--results", str(results)]
+    assert render.main([*arguments, "--check"]) == 1 and not (pages / "figures").exists()
+    assert render.main(arguments) == 0
+    assert "![Route planning time against map size](figures/navigation-planning.svg)" in page.read_text()
+    svg = (pages / "figures" / "navigation-planning.svg").read_text()
+    assert svg.startswith("<?xml") and "Route planning against map size" in svg and "<dc:date>" not in svg
+    assert render.main([*arguments, "--check"]) == 0  # drawn again, the same bytes
+    page.write_text("<!-- figure: navigation nothing -->\n<!-- end figure -->\n")
+    assert render.main(arguments) == 2

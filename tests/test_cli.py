@@ -11,6 +11,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -26,6 +27,7 @@ RESULT_FILES = {
     "odometry_kitti.txt",
     "groundtruth_kitti.txt",
     "loop_closures.csv",
+    "keyframe_frames.csv",
     "objects.csv",
     "config.yaml",
     "metrics.json",
@@ -524,6 +526,24 @@ def image_run(cli, tmp_path_factory: pytest.TempPathFactory, shared_data: Path) 
 
 
 @pytest.mark.slow
+def test_a_run_on_real_images_draws_what_the_detector_saw_at_its_keyframes(cli, shared_data: Path, tmp_path) -> None:
+    """60 m of KITTI 06: the strip has a tile for each keyframe frame (up to 8), two a row, boxes drawn on them."""
+    out = tmp_path / "r06"
+    model = shared_data / "models" / "yolox_nano_coco" / "yolox_nano.onnx"
+    env = {"NEOSLAM_PERCEPTION__DETECTOR__MODEL": str(model)}
+    cli.ok("run", shared_data / "kitti_06_51", "--sequence", "06", "--out", out, "-q", env=env)
+    keyframes = np.unique(np.loadtxt(out / "keyframe_frames.csv", skiprows=1, ndmin=1))
+    strip = cv2.imread(str(out / "plots" / "detections.png"))
+    assert len(keyframes) >= 2 and strip is not None
+    tiles = min(len(keyframes), 8)
+    rows = (tiles + 1) // 2
+    assert strip.shape[1] == 2 * 620 and strip.shape[0] % rows == 0
+    assert 180 <= strip.shape[0] // rows <= 195  # KITTI's 1226 x 370 images, 620 wide
+    grey = (strip[..., 0] == strip[..., 1]) & (strip[..., 1] == strip[..., 2])
+    assert (~grey).mean() > 0.001  # coloured boxes and labels on the grey images
+
+
+@pytest.mark.slow
 def test_run_on_kitti_images_writes_the_results_folder(image_run: Path) -> None:
     assert {p.name for p in image_run.iterdir()} >= RESULT_FILES
     objects = (image_run / "objects.csv").read_text().splitlines()
@@ -534,6 +554,9 @@ def test_run_on_kitti_images_writes_the_results_folder(image_run: Path) -> None:
     # Stereo odometry over 13 m of real images: the odometry ATE is small.
     assert metrics["ate_rmse_m"]["odometry"] < 0.5
     assert len((image_run / "trajectory_tum.txt").read_text().splitlines()) == 12
+    keyframes = np.loadtxt(image_run / "keyframe_frames.csv", skiprows=1, ndmin=1)
+    strip = cv2.imread(str(image_run / "plots" / "detections.png"))  # what the detector saw at the keyframes
+    assert (strip is not None and strip.shape[1] == 2 * 620) if len(keyframes) else strip is None
 
 
 def test_run_on_kitti_images_with_detections_and_odometry_files(

@@ -3,8 +3,8 @@
 Imports are read from the source as written, including those inside functions and under TYPE_CHECKING, since each
 is a dependency all the same. Layers, lowest first: the core types, geometry, errors and text reading; the
 configuration; the cells, loop detection and maps; the SLAM system and navigation on its map; perception, the
-simulator, datasets, the map store, file formats, evaluation and plots; the commands; sweeps; the CLI. A module never
-imports a higher layer.
+simulator, datasets, the map store, file formats, evaluation, plots and reports; the commands; sweeps; the CLI. A
+module never imports a higher layer.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ LAYERS: list[set[str]] = [
     {"config"},
     {"cells", "loop", "mapping"},
     {"relocalisation", "pipeline", "navigation"},
-    {"perception", "sim", "datasets", "store", "io", "evaluation", "viz", "live"},
+    {"perception", "sim", "datasets", "store", "io", "evaluation", "viz", "report", "live"},
     {"commands"},
     {"sweep"},
     {"cli", "__main__"},

@@ -96,6 +96,8 @@ def test_objects_csv_has_the_moving_column(runs: dict[bool, RunResult], tmp_path
     rows = read_table(tmp_path / "objects.csv", OBJECT_COLUMNS)
     assert OBJECT_COLUMNS[-1] == "moving"
     assert [row[-1] for row in rows.rows] == ["0"] * len(on.objects) + ["1"] * len(on.moving_objects)
+    ids = [row[0] for row in rows.rows]
+    assert len(set(ids)) == len(ids)  # an id names one row, static or moving
 
 
 def test_same_street_same_result(runs: dict[bool, RunResult]) -> None:

@@ -8,7 +8,7 @@ import typer
 from typer.core import TyperGroup
 
 from neoslam import __version__
-from neoslam.cli.common import say
+from neoslam.cli.common import FLAG, say
 
 __all__ = ["RERUN_OPTION", "RERUN_SPAWN", "app"]
 
@@ -49,7 +49,8 @@ def _version(value: bool) -> None:
 @app.callback()
 def root(
     version: Annotated[
-        bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and exit.")
+        bool,
+        typer.Option("--version", metavar=FLAG, callback=_version, is_eager=True, help="Print the version and exit."),
     ] = False,
 ) -> None:
     """Neural Object SLAM."""

@@ -11,6 +11,7 @@ import typer
 from neoslam.errors import NeoSLAMError
 
 __all__ = [
+    "FLAG",
     "CalibrationOption",
     "ConfigOption",
     "GoalOption",
@@ -28,10 +29,11 @@ __all__ = [
     "table",
 ]
 
+FLAG = ""  # a flag takes no value: its help shows none (typer would show <bool>)
 ConfigOption = Annotated[Path | None, typer.Option("--config", "-c", help="YAML file overriding the defaults.")]
 OutOption = Annotated[Path, typer.Option("--out", "-o", help="Output folder (written whole or not at all).")]
-OverwriteOption = Annotated[bool, typer.Option("--overwrite", help="Replace a non-empty output folder.")]
-QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")]
+OverwriteOption = Annotated[bool, typer.Option("--overwrite", metavar=FLAG, help="Replace a non-empty output folder.")]
+QuietOption = Annotated[bool, typer.Option("--quiet", "-q", metavar=FLAG, help="No progress bar.")]
 LeftTopicOption = Annotated[
     str | None, typer.Option(help="A bag's left camera topic (Image or CompressedImage); found when unambiguous.")
 ]
@@ -40,7 +42,7 @@ GoalOption = Annotated[
     str | None,
     typer.Option(help='Guide the run to a goal on the map ("truck", "start", ...: docs/navigation.md); guidance.csv.'),
 ]
-StaleOption = Annotated[bool, typer.Option("--stale", help="A stale object may be the --goal.")]
+StaleOption = Annotated[bool, typer.Option("--stale", metavar=FLAG, help="A stale object may be the --goal.")]
 CalibrationOption = Annotated[
     Path | None, typer.Option(metavar="FILE", help="Image folder's calibration (default: its calibration.yaml).")
 ]
@@ -55,7 +57,8 @@ MapOption = Annotated[
     ),
 ]
 LocaliseOnlyOption = Annotated[
-    bool, typer.Option("--localise-only", help="Relocalise in the --map and use it; change nothing in it.")
+    bool,
+    typer.Option("--localise-only", metavar=FLAG, help="Relocalise in the --map and use it; change nothing in it."),
 ]
 RerunOption = Annotated[
     str | None,

@@ -10,6 +10,7 @@ import typer
 from neoslam import stopping
 from neoslam.cli.app import app
 from neoslam.cli.common import (
+    FLAG,
     CalibrationOption,
     ConfigOption,
     GoalOption,
@@ -102,7 +103,9 @@ def ros2_play_command(
     data: Annotated[Path, typer.Argument(help="KITTI root, ROS bag, EuRoC recording or folder of stereo images.")],
     sequence: Annotated[str | None, typer.Option(help="KITTI sequence under a KITTI odometry root.")] = None,
     rate: Annotated[float | None, typer.Option(help="Frames a second (default: as fast as they can be sent).")] = None,
-    compressed: Annotated[bool, typer.Option("--compressed", help="Send PNG CompressedImage messages.")] = False,
+    compressed: Annotated[
+        bool, typer.Option("--compressed", metavar=FLAG, help="Send PNG CompressedImage messages.")
+    ] = False,
     frames: Annotated[
         str | None, typer.Option(metavar="START:STOP", help="Play only these frames (Python slice, e.g. 0:20).")
     ] = None,

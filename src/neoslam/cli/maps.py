@@ -8,7 +8,7 @@ from typing import Annotated, Any
 import typer
 
 from neoslam.cli.app import app
-from neoslam.cli.common import ConfigOption, OutOption, OverwriteOption, fail, say, table
+from neoslam.cli.common import FLAG, ConfigOption, OutOption, OverwriteOption, fail, say, table
 from neoslam.config import load_config
 from neoslam.errors import NeoSLAMError
 
@@ -26,7 +26,8 @@ def route(
         str | None, typer.Option("--from", help="Start, in the same words (default: the experience made last).")
     ] = None,
     stale: Annotated[
-        bool, typer.Option("--stale", help="A stale object (not seen where it should be) may be the goal.")
+        bool,
+        typer.Option("--stale", metavar=FLAG, help="A stale object (not seen where it should be) may be the goal."),
     ] = False,
     config: ConfigOption = None,
     overwrite: OverwriteOption = False,

@@ -9,6 +9,7 @@ import typer
 
 from neoslam.cli.app import app
 from neoslam.cli.common import (
+    FLAG,
     CalibrationOption,
     ConfigOption,
     GoalOption,
@@ -28,7 +29,10 @@ from neoslam.cli.common import (
 from neoslam.config import NOISE_PROFILES, dump_config, load_config
 from neoslam.errors import ConfigError, NeoSLAMError
 
-__all__ = ["detect", "dump_config_command", "evaluate", "run_command", "simulate"]
+__all__ = ["detect", "dump_config_command", "evaluate", "report", "run_command", "simulate"]
+
+
+NO_TRUTH = "none in the dataset: no ATE, RPE or loop precision (KITTI: poses/NN.txt beside sequences/)"
 
 
 @app.command()
@@ -123,6 +127,8 @@ def run_command(
     rows: list[tuple[str, Any]] = [("results", out), ("frames", metrics["frames"])]
     if "ate_rmse_m" in metrics:
         rows += [(f"ATE {name} [m]", value) for name, value in metrics["ate_rmse_m"].items()]
+    else:
+        rows += [("ground truth", NO_TRUTH)]
     rows += [("loop closures", metrics["loops"]["accepted"]), ("objects in map", metrics["objects"])]
     rows += [("frames per second", metrics["timing"]["fps"])]
     if metrics.get("perception"):
@@ -151,7 +157,7 @@ def detect(
     right_topic: RightTopicOption = None,
     calibration: CalibrationOption = None,
     config: ConfigOption = None,
-    overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an existing file.")] = False,
+    overwrite: Annotated[bool, typer.Option("--overwrite", metavar=FLAG, help="Replace an existing file.")] = False,
     quiet: QuietOption = False,
 ) -> None:
     """Run the configured detector over a sequence's left images and write the detections in the JSON-lines
@@ -178,9 +184,23 @@ def evaluate(
     gt_format: Annotated[str, typer.Option("--gt-format", help="tum, kitti or auto.")] = "auto",
     align: Annotated[str | None, typer.Option(help="se3, sim3 or none (default: config).")] = None,
     loops: Annotated[Path | None, typer.Option(help="loop_closures.csv to judge against the ground truth.")] = None,
+    keyframes: Annotated[
+        Path | None,
+        typer.Option(metavar="FILE", help="The run's keyframe frames (default: keyframe_frames.csv beside --loops)."),
+    ] = None,
+    recall_over: Annotated[
+        str,
+        typer.Option(
+            "--recall-over",
+            metavar="keyframes|frames",
+            help="Loop recall over the keyframe frames (as metrics.json) or every frame.",
+        ),
+    ] = "keyframes",
     json_out: Annotated[Path | None, typer.Option("--json", help="Also write the metrics as JSON.")] = None,
     config: ConfigOption = None,
-    overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an existing --json file.")] = False,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", metavar=FLAG, help="Replace an existing --json file.")
+    ] = False,
 ) -> None:
     """ATE, RPE and KITTI drift of a trajectory file against ground truth; loop precision and recall."""
     from neoslam.commands.evaluate import evaluate_files
@@ -193,13 +213,32 @@ def evaluate(
             evaluation = settings.evaluation.model_copy(update={"alignment": align})
             settings = settings.model_copy(update={"evaluation": evaluation})
         metrics = evaluate_files(
-            estimate, groundtruth, settings, est_format, gt_format, loops, json_out, [config], overwrite
-        )
+            estimate, groundtruth, settings, est_format, gt_format, loops, json_out, [config], overwrite, keyframes,
+            recall_over,
+        )  # fmt: skip
     except (NeoSLAMError, OSError) as error:
         fail(error)
     rows = [(key, value) for key, value in metrics.items() if not isinstance(value, dict)]
     rows += [(f"loops {key}", value) for key, value in metrics.get("loops", {}).items()]
+    rows += [(f"no {key}", why) for key, why in metrics.get("absent", {}).items()]
     say(table(rows))
+
+
+@app.command()
+def report(
+    results: Annotated[list[Path], typer.Argument(help="Results folders of `neoslam run`, shown side by side.")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="The HTML file (written whole or not at all).")],
+    overwrite: Annotated[bool, typer.Option("--overwrite", metavar=FLAG, help="Replace an existing file.")] = False,
+) -> None:
+    """One self-contained HTML page of one run or several side by side: figures, metrics, time by stage and the
+    configuration that differed."""
+    from neoslam.commands.report import write_report
+
+    try:
+        size = write_report(results, out, overwrite)
+    except (NeoSLAMError, OSError) as error:
+        fail(error)
+    say(f"wrote {out}: {len(results)} run{'s' if len(results) != 1 else ''}, {size:,} bytes")
 
 
 @app.command("dump-config")

@@ -4,20 +4,24 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
+
+import numpy as np
 
 from neoslam.config import NeoSLAMConfig
-from neoslam.errors import InputError
+from neoslam.errors import ConfigError, InputError
 from neoslam.evaluation.report import loop_metrics, trajectory_metrics
 from neoslam.evaluation.trajectory_metrics import associate
 from neoslam.geometry import is_single_place
 from neoslam.io.atomic import atomic_file, check_target_file
-from neoslam.io.results import read_loop_closures, write_metrics
+from neoslam.io.results import KEYFRAME_FRAMES, read_keyframe_frames, read_loop_closures, write_metrics
 from neoslam.io.trajectory_files import read_trajectory
 
 __all__ = ["evaluate_files"]
 
 MIN_ALIGNMENT_POSES = 3  # a sim3 alignment needs three points
+RecallOver = Literal["keyframes", "frames"]
+RECALL_CHOICES = ("keyframes", "frames")
 
 
 def evaluate_files(
@@ -30,10 +34,18 @@ def evaluate_files(
     json_out: Path | None = None,
     read: Sequence[Path | None] = (),
     overwrite: bool = False,
+    keyframes_path: Path | None = None,
+    recall_over: RecallOver = "keyframes",
 ) -> dict[str, Any]:
     """Metrics of an estimate file against a ground-truth file (timestamps associated first), also written to
-    `json_out` if named (never over one of the files read; over an existing file only with `overwrite`)."""
-    inputs = [estimate_path, truth_path, loops_path, *read]
+    `json_out` if named (never over one of the files read; over an existing file only with `overwrite`).
+
+    Loop recall is counted as metrics.json counts it, over the frames at which the run made a keyframe: those of
+    `keyframes_path`, by default keyframe_frames.csv beside the closures; where there is none (closures of another
+    tool), or with `recall_over` "frames", over every frame. The loops block's `recall_over` says which."""
+    if recall_over not in RECALL_CHOICES:
+        raise ConfigError(f"--recall-over must be {' or '.join(RECALL_CHOICES)}, not {recall_over!r}")
+    inputs = [estimate_path, truth_path, loops_path, keyframes_path, *read]
     if json_out is not None:
         check_target_file(json_out, overwrite, inputs)
     estimate = read_trajectory(estimate_path, estimate_format)
@@ -52,8 +64,21 @@ def evaluate_files(
     metrics |= trajectory_metrics(matched_estimate, matched_truth, config.evaluation)
     if loops_path is not None:
         closures = read_loop_closures(loops_path, frames=len(truth))
-        metrics["loops"] = loop_metrics(closures, truth, config.evaluation)
+        query_frames = _query_frames(loops_path, keyframes_path, recall_over, len(truth))
+        metrics["loops"] = loop_metrics(closures, truth, config.evaluation, query_frames)
     if json_out is not None:
         with atomic_file(json_out, overwrite, inputs) as staging:
             write_metrics(staging, metrics)
     return metrics
+
+
+def _query_frames(loops: Path, keyframes: Path | None, recall_over: str, frames: int) -> np.ndarray | None:
+    """The frames loop recall is counted over: the run's keyframe frames, or None for every frame."""
+    if recall_over == "frames":
+        return None
+    if keyframes is None:
+        beside = loops.parent / KEYFRAME_FRAMES
+        if not beside.is_file():
+            return None  # closures without the run's keyframes: every frame, as the loops block says
+        keyframes = beside
+    return read_keyframe_frames(keyframes, frames=frames)

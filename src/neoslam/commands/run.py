@@ -18,8 +18,10 @@ from neoslam.errors import ConfigError
 from neoslam.io.atomic import atomic_directory
 from neoslam.io.g2o import write_g2o
 from neoslam.io.results import (
+    KEYFRAME_FRAMES,
     write_config,
     write_experience_map,
+    write_keyframe_frames,
     write_loop_closures,
     write_metrics,
     write_object_vector_cells,
@@ -28,12 +30,16 @@ from neoslam.io.results import (
 )
 from neoslam.io.route_files import write_guidance_csv
 from neoslam.navigation.session import GoalGuidance
+from neoslam.perception.frontend import ImageDataset
 from neoslam.pipeline import RunResult, run
 from neoslam.store.recording import MapRecording, check_map_path, map_recording
+from neoslam.viz.detections_strip import SeenObjects, write_detections_strip
 from neoslam.viz.rerun_view import check_rerun_target, recording_target, rerun_session
 from neoslam.viz.run_plots import write_plots
 
 __all__ = ["observers", "run_dataset", "with_backend", "write_results"]
+
+DETECTIONS_PLOT = "detections.png"  # a run on images: what the detector saw at some keyframes
 
 
 def with_backend(config: NeoSLAMConfig, backend: str | None) -> NeoSLAMConfig:
@@ -97,13 +103,14 @@ def run_dataset(
                 on_step.follow(guidance)
             stored = session.stored if session is not None else None
             recorder = session.recorder if session is not None else None
+            seen = SeenObjects() if isinstance(dataset, ImageDataset) else None  # for the detections strip
             start = time.perf_counter()
             result = run(
                 dataset.frames(),
                 config,
                 total=len(dataset),
                 progress=progress,
-                on_step=observers(guidance, on_step, recorder),  # the guidance first: the view shows it
+                on_step=observers(guidance, on_step, recorder, seen),  # the guidance first: the view shows it
                 stored=stored,
                 session_name=dataset.name,
             )
@@ -115,6 +122,10 @@ def run_dataset(
             metrics["guidance"] = guidance.summary()
             write_guidance_csv(staging / "guidance.csv", guidance.records)
         write_results(staging, dataset, result, config, metrics, session)
+        if seen is not None:
+            pairs = dataset.sequence.stereo_pair
+            strip = staging / "plots" / DETECTIONS_PLOT
+            write_detections_strip(strip, lambda frame: pairs(frame)[0], result.keyframe_frames, seen)
     return metrics
 
 
@@ -134,6 +145,7 @@ def write_results(
         trajectories["groundtruth"] = dataset.ground_truth
     write_trajectories(staging, trajectories)
     write_loop_closures(staging / "loop_closures.csv", result.loop_closures, result.closure_sessions())
+    write_keyframe_frames(staging / KEYFRAME_FRAMES, result.keyframe_frames)
     write_objects(staging / "objects.csv", result.objects, result.moving_objects)
     write_object_vector_cells(staging, result.object_vector_cells)
     write_experience_map(staging / "experience_map.json", result.experience_map)
@@ -143,4 +155,5 @@ def write_results(
         metrics["session"] = session_metrics(session, result)
     write_metrics(staging / "metrics.json", metrics)
     if plots:
-        write_plots(staging / "plots", result, dataset.ground_truth, config.matching.score_threshold)
+        threshold = config.matching.score_threshold
+        write_plots(staging / "plots", result, dataset.ground_truth, threshold, config.evaluation)

@@ -40,7 +40,7 @@ class NavigationConfig(Section):
         le=1000,
         description="a goal that is an object or a point is reached from the experiences within this distance of "
         "it, m: the route ends at the one whose route plus straight distance to the goal is shortest (none within: "
-        "at the nearest experience)",
+        "at the nearest experience); guidance to a point this near goes on to the point",
     )
     max_goal_distance: float = Field(
         50.0,
@@ -53,7 +53,8 @@ class NavigationConfig(Section):
         gt=0,
         le=1000,
         description="guidance: the robot has arrived once it has reached the route's end (the goal's position) within "
-        "this distance of it, m: how far beside the end it may be",
+        "this distance of it, m: how far beside the end it may be; within it, a robot with the end abeam or behind "
+        "it has reached the end (it comes no nearer by driving on)",
     )
     end_reached: float = Field(
         0.5,
@@ -120,8 +121,8 @@ class NavigationConfig(Section):
         le=100,
         description="guidance to an object: an observation of the goal's class this close to the goal object (in "
         "the map, at the robot's pose) is a sighting of it, m; arriving at an object this session never sighted (in "
-        "a frame, or in the map's record of it when the route is planned) is reported missing, not arrived (a "
-        "parked car that left)",
+        "a frame, in the map's record of it when the route is planned, or in the recall_frames before it "
+        "relocalised) is looked at for look_time, then reported missing, not arrived (a parked car that left)",
     )
     sightings: int = Field(
         2,

@@ -20,7 +20,16 @@ from scipy.spatial import cKDTree
 
 from neoslam.types import LoopClosure
 
-__all__ = ["LoopCriteria", "DEFAULT_CRITERIA", "LoopStats", "true_revisits", "judge_closures", "evaluate_closures"]
+__all__ = [
+    "LoopCriteria",
+    "DEFAULT_CRITERIA",
+    "LoopStats",
+    "PrecisionRecall",
+    "true_revisits",
+    "judge_closures",
+    "evaluate_closures",
+    "precision_recall_curve",
+]
 
 ClosureLike = LoopClosure | tuple[int, int, float]
 
@@ -117,6 +126,24 @@ def _count_at_least(values: np.ndarray, thresholds: np.ndarray) -> np.ndarray:
     return np.searchsorted(np.sort(-values), -thresholds, side="right")
 
 
+@dataclass(frozen=True)
+class PrecisionRecall:
+    """Precision and recall of accepting the closures scored at least each threshold (the closures' own scores,
+    increasing): the curve a score threshold moves along."""
+
+    thresholds: np.ndarray
+    precision: np.ndarray
+    recall: np.ndarray
+
+
+def _curve(scores: np.ndarray, correct: np.ndarray, best_true_score: np.ndarray, n_revisits: int) -> PrecisionRecall:
+    thresholds = np.unique(scores)
+    accepted = _count_at_least(scores, thresholds)
+    true_positive = _count_at_least(scores[correct], thresholds)
+    recalled = _count_at_least(best_true_score, thresholds)
+    return PrecisionRecall(thresholds, true_positive / np.maximum(accepted, 1), recalled / max(n_revisits, 1))
+
+
 def _sweep(
     scores: np.ndarray, correct: np.ndarray, best_true_score: np.ndarray, n_revisits: int
 ) -> tuple[float, float]:
@@ -128,15 +155,10 @@ def _sweep(
         return float("nan"), float("nan")
     if scores.size == 0:
         return 0.0, 0.0
-    thresholds = np.unique(scores)
-    accepted = _count_at_least(scores, thresholds)
-    true_positive = _count_at_least(scores[correct], thresholds)
-    recalled = _count_at_least(best_true_score, thresholds)
-    precision = true_positive / accepted
-    recall = recalled / n_revisits
-    full_precision = precision == 1.0
-    recall_full = float(recall[full_precision].max()) if full_precision.any() else 0.0
-    return recall_full, float(np.nanmax(_f1(precision, recall)))
+    curve = _curve(scores, correct, best_true_score, n_revisits)
+    full_precision = curve.precision == 1.0
+    recall_full = float(curve.recall[full_precision].max()) if full_precision.any() else 0.0
+    return recall_full, float(np.nanmax(_f1(curve.precision, curve.recall)))
 
 
 def _best_true_score_per_frame(query: np.ndarray, score: np.ndarray, counts: np.ndarray) -> np.ndarray:
@@ -145,6 +167,31 @@ def _best_true_score_per_frame(query: np.ndarray, score: np.ndarray, counts: np.
     for frame, value in zip(query[counts], score[counts], strict=True):
         best[int(frame)] = max(value, best.get(int(frame), -np.inf))
     return np.array(list(best.values()), dtype=float)
+
+
+def _judged(
+    closures: list[ClosureLike],
+    gt_positions: np.ndarray,
+    criteria: LoopCriteria,
+    query_frames: Sequence[int] | np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Each closure's score and verdict, the best true score of each recalled query frame, and the revisits."""
+    query, _, score = _closure_arrays(closures)
+    correct = judge_closures(closures, gt_positions, criteria)
+    frames = _query_indices(len(gt_positions), query_frames)
+    revisit = frames[true_revisits(gt_positions, criteria, frames)]
+    best_true_score = _best_true_score_per_frame(query, score, correct & np.isin(query, revisit))
+    return score, correct, best_true_score, len(revisit)
+
+
+def precision_recall_curve(
+    closures: Iterable[ClosureLike],
+    gt_positions: np.ndarray,
+    criteria: LoopCriteria = DEFAULT_CRITERIA,
+    query_frames: Sequence[int] | np.ndarray | None = None,
+) -> PrecisionRecall:
+    """The precision-recall curve of the closures' score (recall as in `evaluate_closures`)."""
+    return _curve(*_judged(list(closures), gt_positions, criteria, query_frames))
 
 
 def evaluate_closures(
@@ -158,22 +205,16 @@ def evaluate_closures(
     Recall counts distinct query frames: several true closures of one frame recall it once. Closures whose query
     frame is not among `query_frames` still count for precision but not for recall.
     """
-    closures = list(closures)
-    query, _, score = _closure_arrays(closures)
-    correct = judge_closures(closures, gt_positions, criteria)
-    frames = _query_indices(len(gt_positions), query_frames)
-    revisit = frames[true_revisits(gt_positions, criteria, frames)]
-    counts_for_recall = correct & np.isin(query, revisit)
-    best_true_score = _best_true_score_per_frame(query, score, counts_for_recall)
+    score, correct, best_true_score, revisits = _judged(list(closures), gt_positions, criteria, query_frames)
     true_positive = int(correct.sum())
     precision = _ratio(true_positive, len(correct))
-    recall = _ratio(len(best_true_score), len(revisit))
-    recall_full, f1_max = _sweep(score, correct, best_true_score, len(revisit))
+    recall = _ratio(len(best_true_score), revisits)
+    recall_full, f1_max = _sweep(score, correct, best_true_score, revisits)
     return LoopStats(
         accepted=len(correct),
         true_positive=true_positive,
         false_positive=len(correct) - true_positive,
-        revisit_frames=len(revisit),
+        revisit_frames=revisits,
         recalled_frames=len(best_true_score),
         precision=precision,
         recall=recall,

@@ -8,8 +8,15 @@ from typing import Any
 import numpy as np
 
 from neoslam.config import EvaluationConfig
-from neoslam.evaluation.loops import LoopCriteria, evaluate_closures
+from neoslam.evaluation.loops import (
+    LoopCriteria,
+    PrecisionRecall,
+    evaluate_closures,
+    judge_closures,
+    precision_recall_curve,
+)
 from neoslam.evaluation.trajectory_metrics import (
+    KITTI_SEGMENT_LENGTHS_M,
     ErrorStats,
     absolute_trajectory_error,
     kitti_drift,
@@ -44,7 +51,7 @@ def trajectory_metrics(estimate: Trajectory, truth: Trajectory, config: Evaluati
         except ValueError:
             rpe_translation = rpe_rotation = nan_stats
         drift = kitti_drift(estimate, truth)
-    return {
+    metrics: dict[str, Any] = {
         "ate_rmse_m": _finite(ate.rmse),
         "ate_max_m": _finite(ate.max),
         "rpe_translation_rmse_m": _finite(rpe_translation.rmse),
@@ -52,11 +59,33 @@ def trajectory_metrics(estimate: Trajectory, truth: Trajectory, config: Evaluati
         "kitti_translation_percent": _finite(drift.translation_percent),
         "kitti_rotation_deg_per_100m": _finite(drift.rotation_deg_per_100m),
     }
+    absent = _absent(metrics, truth, config)
+    return metrics | ({"absent": absent} if absent else {})
+
+
+def _absent(metrics: dict[str, Any], truth: Trajectory, config: EvaluationConfig) -> dict[str, str]:
+    """Why each figure that is None is absent, in words (a short drive has no RPE at a 100 m step)."""
+    steps = np.linalg.norm(np.diff(truth.positions, axis=0), axis=1) if len(truth) > 1 else np.zeros(0)
+    route_m = float(steps.sum()) if np.isfinite(steps).all() else float("nan")
+    route = f"the route ({route_m:.1f} m, {len(truth)} poses)"
+    why = {}
+    if metrics["ate_rmse_m"] is None:
+        why["ate"] = f"{route} cannot be aligned ({config.alignment} needs 3 poses or more, not all on one point)"
+    if metrics["rpe_translation_rmse_m"] is None:
+        why["rpe"] = f"{route} has no pose pairs evaluation.rpe_delta = {config.rpe_delta:g} {config.rpe_unit} apart"
+    if metrics["kitti_translation_percent"] is None:
+        shortest = min(KITTI_SEGMENT_LENGTHS_M)
+        why["kitti_drift"] = f"{route} is shorter than KITTI's shortest segment ({shortest:g} m)"
+    return why
 
 
 def _rpe(estimate: Trajectory, truth: Trajectory, config: EvaluationConfig) -> tuple[ErrorStats, ErrorStats]:
     rpe = relative_pose_error(estimate, truth, delta=config.rpe_delta, unit=config.rpe_unit)
     return rpe.translation, rpe.rotation
+
+
+RECALL_OVER_KEYFRAMES = "keyframe frames"  # revisits at which the run made or recognised a keyframe
+RECALL_OVER_FRAMES = "every frame"  # every revisit frame: lower, as most frames make no keyframe
 
 
 def loop_metrics(
@@ -66,13 +95,33 @@ def loop_metrics(
     query_frames: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """The loops block: counts always, precision and recall only when ground truth exists. Recall is over
-    `query_frames` (the keyframes' frames: only they can close a loop), or all frames."""
+    `query_frames` (the keyframes' frames: only they can close a loop), or every frame; `recall_over` says which."""
     block: dict[str, Any] = {"accepted": len(closures)}
     if truth is None:
         return block
-    criteria = LoopCriteria(config.loop_max_distance, config.loop_min_frame_gap)
+    criteria, positions = _loop_criteria(truth, config)
+    over = RECALL_OVER_FRAMES if query_frames is None else RECALL_OVER_KEYFRAMES
+    return block | evaluate_closures(closures, positions, criteria, query_frames).as_dict() | {"recall_over": over}
+
+
+def closure_verdicts(closures: list[LoopClosure], truth: Trajectory, config: EvaluationConfig) -> np.ndarray:
+    """(k,) bool: each closure (frames of the trajectory `truth` follows) true by the loops block's criteria."""
+    criteria, positions = _loop_criteria(truth, config)
+    return judge_closures(closures, positions, criteria)
+
+
+def closure_curve(
+    closures: list[LoopClosure], truth: Trajectory, config: EvaluationConfig, query_frames: np.ndarray | None = None
+) -> PrecisionRecall:
+    """The closures' precision-recall curve over their score, by the loops block's criteria and recall."""
+    criteria, positions = _loop_criteria(truth, config)
+    return precision_recall_curve(closures, positions, criteria, query_frames)
+
+
+def _loop_criteria(truth: Trajectory, config: EvaluationConfig) -> tuple[LoopCriteria, np.ndarray]:
+    """A true closure's criteria and the positions they are measured on (horizontal by default)."""
     positions = truth.positions[:, :2] if config.loop_distance == "horizontal" else truth.positions
-    return block | evaluate_closures(closures, positions, criteria, query_frames).as_dict()
+    return LoopCriteria(config.loop_max_distance, config.loop_min_frame_gap), positions
 
 
 def cell_metrics(cell_states: np.ndarray, odometry: Trajectory, object_vector_cells) -> dict[str, Any]:

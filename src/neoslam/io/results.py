@@ -19,8 +19,11 @@ from neoslam.text import read_text
 from neoslam.types import LoopClosure, Trajectory
 
 __all__ = [
+    "KEYFRAME_FRAMES",
     "LOOP_COLUMNS",
     "OBJECT_COLUMNS",
+    "read_keyframe_frames",
+    "write_keyframe_frames",
     "write_trajectories",
     "write_loop_closures",
     "write_objects",
@@ -37,6 +40,8 @@ LOOP_COLUMNS = (
 )  # fmt: skip
 LOOP_COLUMNS_WITHOUT_SESSIONS = LOOP_COLUMNS[:-2]  # as written before maps were kept over sessions
 OBJECT_COLUMNS = ("id", "label", "x", "y", "z", "observations", "moving")
+KEYFRAME_FRAMES = "keyframe_frames.csv"  # beside loop_closures.csv: the frames loop recall is counted over
+KEYFRAME_FRAME_COLUMNS = ("frame",)
 
 
 def write_trajectories(folder: Path, trajectories: dict[str, Trajectory]) -> None:
@@ -61,12 +66,13 @@ def write_loop_closures(path: Path, closures: list[LoopClosure], sessions: list[
 
 
 def write_objects(path: Path, objects: list[MapObject], moving: list[MapObject] | None = None) -> None:
-    """The map's objects (moving 0), then the moving objects where they were last seen (moving 1; their ids are
-    their own: an object is named by id and moving together)."""
-    rows = [
-        [o.id, o.label, *(f"{v:.4f}" for v in o.position), o.observations, flag]
-        for flag, group in ((0, objects), (1, moving or []))
-        for o in group
+    """The map's objects (moving 0, their map ids), then the moving objects where they were last seen (moving 1,
+    numbered on from the map's largest id in the order the motion detector tracked them): an id names one row."""
+    first_moving = max((o.id for o in objects), default=-1) + 1
+    rows = [[o.id, o.label, *(f"{v:.4f}" for v in o.position), o.observations, 0] for o in objects]
+    rows += [
+        [first_moving + k, o.label, *(f"{v:.4f}" for v in o.position), o.observations, 1]
+        for k, o in enumerate(moving or [])
     ]
     write_table(path, OBJECT_COLUMNS, rows)
 
@@ -181,3 +187,22 @@ def read_loop_closures(path: Path, frames: int | None = None) -> list[LoopClosur
             )
         )
     return closures
+
+
+def write_keyframe_frames(path: Path, frames: np.ndarray) -> None:
+    """The frames at which the run made or recognised a keyframe (only they can close a loop): the query frames of
+    metrics.json's loop recall, and of `neoslam evaluate --loops` when this file is beside the closures."""
+    write_table(path, KEYFRAME_FRAME_COLUMNS, [[int(frame)] for frame in frames])
+
+
+def read_keyframe_frames(path: Path, frames: int | None = None) -> np.ndarray:
+    """keyframe_frames.csv back: each frame a non-negative integer within the `frames` poses of the ground truth."""
+    rows = read_table(path, KEYFRAME_FRAME_COLUMNS)
+    values = numeric_column(path, rows, KEYFRAME_FRAME_COLUMNS, "frame")
+    for k, value in enumerate(values):
+        if value != int(value) or value < 0:
+            raise InputError(path, f"column frame: {value:g} is not a non-negative integer", line=int(rows.lines[k]))
+        if frames is not None and value >= frames:
+            problem = f"column frame: frame {value:g} is beyond the {frames} poses of the ground truth"
+            raise InputError(path, problem, line=int(rows.lines[k]))
+    return values.astype(int)

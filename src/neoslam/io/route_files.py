@@ -120,8 +120,8 @@ def _cell(value: object) -> object:
 
 def write_guidance_csv(path: Path, records: list[GuidanceRecord]) -> None:
     """A run's guidance (`neoslam run --goal`), a row per frame: its state (not_localised, on_route, off_route,
-    replanned, arrived, missing, unreachable), the next waypoint (experience, x, y in the map frame), the distance and
-    bearing to it (m, degrees in the robot frame, positive left), the distance left along the route, straight to
-    the goal and from the route, and whether an object goal was seen."""
+    replanned, arrived, looking, missing, unreachable), the next waypoint (experience, x, y in the map frame; while
+    looking, the goal object), the distance and bearing to it (m, degrees in the robot frame, positive left), the
+    distance left along the route, straight to the goal and from the route, and whether an object goal was seen."""
     rows = [[_cell(value) for value in record.row().values()] for record in records]
     write_table(path, GUIDANCE_COLUMNS, rows)

@@ -18,8 +18,9 @@ OBJECTNESS_COLUMN = 4
 FIRST_CLASS_COLUMN = 5
 MAX_LOG_SIZE = 20.0  # exp of a wild size logit would overflow
 MODEL_HELP = (
-    "get yolox_nano.onnx (and coco_classes.txt) from the GitHub repository Kazuhito00/YOLOX-ONNX-TFLite-Sample, "
-    "folder model/ (see shared/data/models/README.md), and set perception.detector.model to it; "
+    "the default is models/yolox_nano_coco/yolox_nano.onnx under $NEOSLAM_DATA (unset: ../shared/data, from the "
+    "folder you run in): set NEOSLAM_DATA to the data folder, or perception.detector.model to the file; "
+    "yolox_nano.onnx comes from the GitHub repository Kazuhito00/YOLOX-ONNX-TFLite-Sample, folder model/; "
     "or run another detector and pass its output with --detections FILE"
 )
 

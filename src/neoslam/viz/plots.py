@@ -1,6 +1,6 @@
-"""The paper's figures as PNG files: maps of ground truth, odometry and the corrected map in 2-D and 3-D
-(Fig. 3d, 3b), the error of the maps along the route (Fig. 4b), the OVCN's training loss (Fig. 4a) and the matching
-scores of a keyframe against the stored ones (Fig. 4c)."""
+"""The paper's figures as PNG files: the maps of ground truth, odometry and the corrected map in 3-D (Fig. 3b; the
+top view, Fig. 3d, is neoslam.viz.map_plot's), the error of the maps along the route (Fig. 4b), the OVCN's training
+loss (Fig. 4a) and the matching scores of a keyframe against the stored ones (Fig. 4c)."""
 
 from __future__ import annotations
 
@@ -12,16 +12,16 @@ matplotlib.use("Agg")  # headless: files only
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from neoslam.mapping.object_map import MapObject  # noqa: E402
+from neoslam.evaluation.loops import PrecisionRecall  # noqa: E402
 from neoslam.types import Trajectory  # noqa: E402
 
 __all__ = [
-    "plot_map_2d",
     "plot_map_3d",
     "plot_keyframe_labels",
     "plot_error_along_route",
     "plot_ovcn_loss",
     "plot_matching_scores",
+    "plot_precision_recall",
 ]
 
 DPI = 120
@@ -39,19 +39,8 @@ def _save(figure, path: Path) -> None:
     plt.close(figure)
 
 
-def plot_map_2d(path: Path, trajectories: dict[str, Trajectory], objects: list[MapObject] | None = None) -> None:
-    """Top view of each trajectory (already in the frame to show) and the object map (Fig. 3d)."""
-    figure, axes = plt.subplots(figsize=(8, 7))
-    for o in objects or []:
-        axes.plot(*o.position[:2], ".", markersize=3, color=LABEL_COLOURS.get(o.label, "grey"), alpha=0.6)
-    for name, trajectory in trajectories.items():
-        axes.plot(*trajectory.positions[:, :2].T, label=name, **STYLES.get(name, {}))
-    axes.plot(*next(iter(trajectories.values())).positions[0, :2], "k^", markersize=8, label="start")
-    axes.set(xlabel="x [m]", ylabel="y [m]", title="Object experience map, top view")
-    axes.set_aspect("equal", adjustable="datalim")
-    axes.grid(alpha=0.3)
-    axes.legend(loc="best", fontsize=8)
-    _save(figure, path)
+def _title(title: str, note: str | None) -> str:
+    return title if note is None else f"{title}\n({note})"
 
 
 def plot_keyframe_labels(path: Path, trajectory: Trajectory, labels: np.ndarray, points: np.ndarray) -> None:
@@ -68,25 +57,32 @@ def plot_keyframe_labels(path: Path, trajectory: Trajectory, labels: np.ndarray,
     _save(figure, path)
 
 
-def plot_map_3d(path: Path, trajectories: dict[str, Trajectory]) -> None:
+def plot_map_3d(path: Path, trajectories: dict[str, Trajectory], note: str | None = None) -> None:
     """The trajectories in 3-D, height exaggerated so that slopes show (Fig. 3b)."""
     figure = plt.figure(figsize=(8, 6))
     axes = figure.add_subplot(projection="3d")
     for name, trajectory in trajectories.items():
         axes.plot(*trajectory.positions.T, label=name, **STYLES.get(name, {}))
-    axes.set(xlabel="x [m]", ylabel="y [m]", zlabel="z [m]", title="Object experience map in 3-D")
+    axes.set(xlabel="x [m]", ylabel="y [m]", zlabel="z [m]", title=_title("Object experience map in 3-D", note))
     axes.legend(loc="best", fontsize=8)
     _save(figure, path)
 
 
-def plot_error_along_route(path: Path, truth: Trajectory, estimates: dict[str, Trajectory]) -> None:
-    """Position error of each (aligned) estimate against the distance travelled (Fig. 4b)."""
+def plot_error_along_route(
+    path: Path, truth: Trajectory, estimates: dict[str, Trajectory], note: str | None = None
+) -> None:
+    """Position error of each (aligned) estimate against the distance travelled (Fig. 4b); `note`: how they were
+    aligned, under the title."""
     travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(truth.positions, axis=0), axis=1))])
     figure, axes = plt.subplots(figsize=(8, 4))
     for name, estimate in estimates.items():
         error = np.linalg.norm(estimate.positions - truth.positions, axis=1)
         axes.plot(travelled, error, label=f"{name} (RMSE {np.sqrt(np.mean(error**2)):.2f} m)", **STYLES.get(name, {}))
-    axes.set(xlabel="distance travelled [m]", ylabel="position error [m]", title="Error of the maps along the route")
+    axes.set(
+        xlabel="distance travelled [m]",
+        ylabel="position error [m]",
+        title=_title("Error of the maps along the route", note),
+    )
     axes.grid(alpha=0.3)
     axes.legend(loc="best", fontsize=8)
     _save(figure, path)
@@ -128,4 +124,19 @@ def plot_matching_scores(
     axes.set_yscale("symlog", linthresh=1.0)
     axes.grid(alpha=0.3)
     axes.legend(loc="best", fontsize=8)
+    _save(figure, path)
+
+
+def plot_precision_recall(path: Path, curve: PrecisionRecall, note: str | None = None) -> None:
+    """Precision against recall of the run's accepted closures as their score threshold rises (each point: accept
+    the closures scored at least one closure's score); the lowest threshold, every closure the run accepted, is
+    marked. `note`: what recall is counted over, under the title."""
+    figure, axes = plt.subplots(figsize=(5.5, 4.5))
+    axes.step(curve.recall, curve.precision, where="post", color="tab:blue", linewidth=1.2)
+    axes.plot(curve.recall, curve.precision, "o", color="tab:blue", markersize=3, label="a score threshold")
+    axes.plot(curve.recall[:1], curve.precision[:1], "*", color="tab:red", markersize=12, label="as the run accepted")
+    axes.set(xlabel="recall", ylabel="precision", xlim=(-0.02, 1.02), ylim=(-0.02, 1.05))
+    axes.set_title(_title("Loop closures: precision and recall", note))
+    axes.grid(alpha=0.3)
+    axes.legend(loc="lower left", fontsize=8)
     _save(figure, path)
