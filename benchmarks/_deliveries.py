@@ -4,7 +4,7 @@ street with no prior pose, relocalises in the map, and drives by the guidance al
 A delivery is planned from a seed (`plan_deliveries`): a start node on the true street graph and the direction it
 faces, and a goal of the goal language. The mix (GOAL_MIX): an object by id that a world object stands for, a class
 query (`nearest car`, the class drawn as often as the map holds it), an experience, a point on the streets (in the
-map's frame, through T_world_map) and `start of session 1` (the map's start: `start` alone is where the delivery's own
+map's frame as the map draws that spot: placed from its nearest experience, `MappedDrive.drawn_on_map`) and `start of session 1` (the map's start: `start` alone is where the delivery's own
 session started). A removed-goal delivery names an object by id whose world object is
 taken out of the world before the robot starts.
 
@@ -102,7 +102,7 @@ def _goal(kind: str, mapped: MappedDrive, rng: np.random.Generator) -> tuple[str
         return f"experience {experience}", mapped.experience_truth[experience], -1
     if kind == "point":
         point = mapped.streets.positions[int(rng.integers(len(mapped.streets)))]
-        x, y, _ = mapped.to_map(point)
+        x, y, _ = mapped.drawn_on_map(point)
         return f"{x:.2f},{y:.2f}", point, -1
     return "start of session 1", mapped.experience_truth[0], -1  # "start" alone: the delivery session's own
 

@@ -65,10 +65,14 @@ class MappedDrive:
     object_match: np.ndarray  # (k,) the world object each stands for, -1: none within MATCH_RADIUS_M
     mapping_s: float  # wall time of the simulation and the run
 
-    def to_map(self, point: np.ndarray) -> np.ndarray:
-        """A world point in the map's frame."""
-        rotation, origin = self.world_from_map[:3, :3], self.world_from_map[:3, 3]
-        return rotation.T @ (np.asarray(point, dtype=float) - origin)
+    def drawn_on_map(self, point: np.ndarray) -> np.ndarray:
+        """A world point where the map draws it, map frame: placed from its nearest experience as that experience
+        truly is, then from the experience's pose in the map. A user picks a street spot on the map's plot, among
+        the map's streets; through T_world_map alone the point would carry the map's drift there as well."""
+        nearest = int(np.argmin(np.linalg.norm(self.experience_truth - np.asarray(point, dtype=float), axis=1)))
+        experience = self.state.experiences[nearest]
+        local = np.linalg.inv(self.truth.poses[experience.frame_index]) @ np.append(point, 1.0)
+        return (np.asarray(self.state.experience_poses[nearest]) @ local)[:3]
 
     def match_of(self, object_id: int) -> int:
         """The world object a map object stands for (-1: none, or not a goal the map offers)."""

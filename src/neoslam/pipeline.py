@@ -154,8 +154,9 @@ class NeoSLAM:
         self.experience_map.correct()  # 3.6: relaxation (eq. 18)
         pose = self.experience_map.current_pose(odometry)
         anchor, anchor_from_robot = self.experience_map.anchor(odometry)
-        self.object_map.refresh(self.experience_map.graph.poses)  # objects follow the corrected map
-        self.object_map.add(pose, observations, anchor, anchor_from_robot, self.keyframes.odometer_m)
+        parts = self.experience_map.parts.labels()  # a later session's objects stay apart until it relocalises
+        self.object_map.refresh(self.experience_map.graph.poses, parts=parts)  # objects follow the corrected map
+        self.object_map.add(pose, observations, anchor, anchor_from_robot, self.keyframes.odometer_m, parts)
         self._record(frame, pose)
         return pose
 
@@ -352,7 +353,8 @@ class NeoSLAM:
 
     def result(self, frame_times_s: np.ndarray) -> RunResult:
         self.experience_map.finish()  # links still waiting for the pose graph
-        self.object_map.refresh(self.experience_map.graph.poses, force=True)  # the last merges, on the final map
+        parts = self.experience_map.parts.labels()
+        self.object_map.refresh(self.experience_map.graph.poses, True, parts)  # the last merges, on the final map
         stamps = self._record_columns(slice(0, 1))[:, 0]
         stored = self.loop_detector.index.keyframes
         own = [c.match_keyframe for c in self.loop_closures if c.match_keyframe >= self.keyframes.first_id]

@@ -169,6 +169,32 @@ def test_objects_seen_again_are_merged_once_the_map_is_corrected() -> None:
     assert again.observations == 7
 
 
+def test_a_part_not_joined_keeps_its_objects_apart_until_it_joins() -> None:
+    """A later session (experience 1, a part of its own) starts at the identity of its own frame, as the stored map
+    (experience 0) did: a car it sees at the stored car's coordinates is another car, neither moved nor merged,
+    until the parts join; then the refresh on the joined map merges the car it saw twice."""
+    object_map = ObjectMap(CONFIG)
+    experiences = np.array([pose(0.0, (0, 0, 0)), pose(0.0, (0, 0, 0))])
+    stored_car, later_car = np.array([10.0, 3.0, 0.5]), np.array([10.5, 3.2, 0.5])
+    apart = np.array([0, 1])
+    stored = [object_map.add(experiences[0], (seen("car", experiences[0], stored_car),), 0, np.eye(4), None, apart)
+              for _ in range(3)]  # fmt: skip
+    later = [object_map.add(experiences[1], (seen("car", experiences[1], later_car),), 1, np.eye(4), None, apart)
+             for _ in range(3)]  # fmt: skip
+    assert {i for [i] in stored} == {0} and {i for [i] in later} == {1}
+    assert object_map.refresh(experiences, True, apart) == 0  # the parts' frames are not one frame
+    np.testing.assert_allclose(object_map.objects()[0].position, stored_car, atol=1e-9)  # the stored car stays
+
+    joined = experiences.copy()
+    joined[1] = pose(0.0, (-80.0, 40.0, 0.0))  # the later part moved into the map's frame: its car is elsewhere
+    assert object_map.refresh(joined, True, np.array([0, 0])) == 0
+    assert len(object_map.objects(joined)) == 2
+    same_place = experiences.copy()  # or it really was the stored car: one car once the parts are one
+    assert object_map.refresh(same_place, True, np.array([0, 0])) == 1
+    [car] = object_map.objects(same_place)
+    assert (car.id, car.observations) == (0, 6)
+
+
 def test_a_map_that_hardly_moved_is_not_refreshed() -> None:
     object_map, experiences, _, _ = _two_experience_map()
     assert object_map.refresh(experiences) == 0  # the first refresh computes, nothing to merge

@@ -131,3 +131,20 @@ def test_an_observation_nearer_another_object_of_the_class_is_that_one():
             states.append(guidance.latest.state)
         needed = NeoSLAMConfig().navigation.sightings
         assert states == ["looking"] * (needed - 1) + [expected]  # a frame alone does not see it
+
+
+def test_a_far_observation_whose_depth_cannot_place_it_is_no_sighting():
+    """A robot 40 m before the goal car along the street sees a car that its stereo centre puts on the goal (a car
+    parked a few metres from where the goal car stood, its depth metres off at that range): no sighting, however
+    many frames have it; the same observation from 10 m is one."""
+    streets = ladder()
+    goal = streets.builder.add_object("car", (60, -5, 0.5), {streets.at(60, 0): 3, streets.at(55, 0): 2})
+    state = _running(streets.builder.state())
+    config = NeoSLAMConfig()
+    needed = config.navigation.sightings
+    for start, expected in ((20, "on_route"), (50, "arrived")):
+        robot = state.experience_poses[streets.at(start, 0)]
+        guidance = GoalGuidance(f"object {goal}", config)
+        for index in range(5, 5 + needed):
+            guidance(state, _frame(index, robot, (("car", (60.0, -4.2)),)), robot)
+        assert guidance.latest is not None and guidance.summary()["goal_seen"] is (expected == "arrived")

@@ -124,6 +124,15 @@ class NavigationConfig(Section):
         "a frame, in the map's record of it when the route is planned, or in the recall_frames before it "
         "relocalised) is looked at for look_time, then reported missing, not arrived (a parked car that left)",
     )
+    sighting_depth_sigma: float = Field(
+        1.5,
+        gt=0,
+        le=100,
+        description="guidance to an object: only an observation whose depth std is at most this is a sighting, m "
+        "(the object map's: object_map.depth_sigma_at_1m times depth squared, or the front end's own when larger; "
+        "1.5 m is about 32 m away): a far view of another car beside a goal that left lands on the goal, and an "
+        "object far off the street is seen from no nearer than 20 to 30 m",
+    )
     sightings: int = Field(
         2,
         ge=1,

@@ -14,7 +14,10 @@ A robot that drives its streets every day must end with the same map, not a grow
   the ground plane (and `height_tolerance` in height) are merged (their observations joined; the older id stays);
 - objects whose means have converged within the association radius are merged every MERGE_EVERY_M of travel too;
 - an object seen fewer than `min_observations` times within `tentative_distance` metres of travel is forgotten: a
-  false detection, or an object glimpsed once a pass, would otherwise pile up into an object over the passes.
+  false detection, or an object glimpsed once a pass, would otherwise pile up into an object over the passes;
+- objects of two parts of the experience map (a later session before it relocalises, and the stored map) are never
+  associated or merged: the parts' frames both start at their session's first pose, so equal coordinates there
+  are not one place. Once the parts join, the refresh merges the objects the session saw twice.
 Observations are kept summed per (object, experience), so memory grows with the map, not with the frames.
 """
 
@@ -81,6 +84,7 @@ class ObjectMap:
         self._weights = np.zeros(INITIAL_CAPACITY)  # sum of its observations' weights
         self._counts = np.zeros(INITIAL_CAPACITY, dtype=int)
         self._last_seen = np.zeros(INITIAL_CAPACITY)  # odometer reading of the last observation, m
+        self._home = np.zeros(INITIAL_CAPACITY, dtype=int)  # an experience it was seen from: names its map part
         self._tentative: set[int] = set()  # objects not yet seen min_observations times
         # Observations summed per (object, experience), in the experience's frame: the map follows the correction.
         self._pair_rows: dict[tuple[int, int], int] = {}
@@ -110,15 +114,17 @@ class ObjectMap:
         anchor: int = 0,
         anchor_from_robot: np.ndarray | None = None,
         odometer_m: float | None = None,
+        parts: np.ndarray | None = None,
     ) -> list[int]:
         """Fuse one frame's observations seen from robot pose T_world_robot; returns their object ids. `anchor`
         names the experience the frame belongs to and `anchor_from_robot` the robot pose in its frame;
-        `odometer_m`, the distance travelled, lets tentative objects be forgotten (None: never)."""
+        `odometer_m`, the distance travelled, lets tentative objects be forgotten (None: never); `parts`, the map
+        part of every experience (MapParts.labels), keeps the objects of other parts apart (None: one part)."""
         if odometer_m is not None:
             self._forget(odometer_m)
             if odometer_m - self._merged_at >= MERGE_EVERY_M:  # copies made before their views converged
                 self._merged_at = odometer_m
-                self._merge(np.flatnonzero(self._counts[: self._n] > 0))
+                self._merge(np.flatnonzero(self._counts[: self._n] > 0), parts)
         if not observations:
             return []
         centres = np.array([o.center_camera for o in observations], dtype=float)
@@ -132,7 +138,7 @@ class ObjectMap:
         sigmas = depth_sigmas(observations, self.config)
         ids = []
         for observation, point, local, ray, sigma in zip(observations, world, relative, rays, sigmas, strict=True):
-            index = self._associate(observation.label, point, ray, float(sigma))
+            index = self._associate(observation.label, point, ray, float(sigma), anchor, parts)
             self._add_to_pair(index, anchor, local, 1.0 / sigma**2)
             if odometer_m is not None:
                 self._last_seen[index] = odometer_m
@@ -168,8 +174,11 @@ class ObjectMap:
         if not members:  # no empty cells: the hash holds the map, not every place an object ever was
             del self._cells[cell]
 
-    def _associate(self, label: str, position: np.ndarray, ray: np.ndarray, sigma: float) -> int:
-        """The nearest live object of the label inside the observation's gate (then updated), or a new one. In the
+    def _associate(
+        self, label: str, position: np.ndarray, ray: np.ndarray, sigma: float, anchor: int, parts: np.ndarray | None
+    ) -> int:
+        """The nearest live object of the label and of the anchor's map part inside the observation's gate (then
+        updated), or a new one. In the
         ground plane the gate is the association radius across the viewing ray and, along it, `gate_sigmas` depth
         stds if that is more (a far stereo centre is off mostly along the ray); in height, `height_tolerance` if
         that is more than the radius (objects stand on the road, and a pitch or height error of the pose moves a
@@ -179,10 +188,13 @@ class ObjectMap:
         height_gate = max(radius, self.config.height_tolerance)
         reach = int(np.ceil(along_gate / radius))
         _, x, y = self._cell(label, position)
+        part = None if parts is None else parts[anchor]
         nearest, nearest_score = -1, 1.0
         for dx in range(-reach, reach + 1):
             for dy in range(-reach, reach + 1):
                 for index in self._cells.get((label, x + dx, y + dy), ()):
+                    if part is not None and parts[self._home[index]] != part:
+                        continue
                     offset = self._mean(index) - position
                     along = float(offset[:2] @ ray)
                     across_squared = max(float(offset[:2] @ offset[:2]) - along * along, 0.0)
@@ -198,6 +210,8 @@ class ObjectMap:
             self._weights = _grown(self._weights, self._n)
             self._counts = _grown(self._counts, self._n)
             self._last_seen = _grown(self._last_seen, self._n)
+            self._home = _grown(self._home, self._n)
+            self._home[nearest] = anchor
             if self.config.min_observations > 1:
                 self._tentative.add(nearest)
         self._sums[nearest] += weight * position
@@ -263,11 +277,11 @@ class ObjectMap:
         sums[self._counts[: self._n] == 0] = 0.0
         return sums
 
-    def refresh(self, anchor_poses: np.ndarray, force: bool = False) -> int:
+    def refresh(self, anchor_poses: np.ndarray, force: bool = False, parts: np.ndarray | None = None) -> int:
         """Follow the corrected map: on the first call, once an experience has moved more than REFRESH_SHIFT_M since
         the last refresh (or since it was first given), or with `force`, recompute every object from its
-        observations and merge the objects of one label that now lie within the association radius of each other.
-        Returns the number of objects merged away."""
+        observations and merge the objects of one label and one map part (`parts`, as for `add`) that now lie
+        within the association radius of each other. Returns the number of objects merged away."""
         positions = anchor_poses[:, :3, 3]
         previous = self._refreshed_positions
         force = force or previous is None  # the first refresh: the poses the objects were seen with are unknown
@@ -284,11 +298,12 @@ class ObjectMap:
         live = np.flatnonzero(self._counts[: self._n] > 0)
         for index in live:
             self._place(int(index))
-        return self._merge(live)
+        return self._merge(live, parts)
 
-    def _merge(self, live: np.ndarray) -> int:
-        """Merge live objects of one label closer than the association radius, nearest pairs first; each merge
-        checks the distance between the merged means, so a chain of objects does not collapse into one."""
+    def _merge(self, live: np.ndarray, parts: np.ndarray | None) -> int:
+        """Merge live objects of one label and one map part closer than the association radius, nearest pairs
+        first; each merge checks the distance between the merged means, so a chain of objects does not collapse
+        into one."""
         if len(live) < 2:
             return 0
         radius = self.config.association_radius
@@ -299,6 +314,9 @@ class ObjectMap:
         same_label = labels[pairs[:, 0]] == labels[pairs[:, 1]]
         level = np.abs(means[pairs[:, 0], 2] - means[pairs[:, 1], 2]) <= height_gate
         pairs = pairs[same_label & level]
+        if parts is not None:
+            homes = parts[self._home[live]]
+            pairs = pairs[homes[pairs[:, 0]] == homes[pairs[:, 1]]]
         if len(pairs) == 0:
             return 0
         order = np.argsort(np.linalg.norm(means[pairs[:, 0], :2] - means[pairs[:, 1], :2], axis=1), kind="stable")
@@ -384,6 +402,8 @@ class ObjectMap:
         self._pair_counts = _grown(np.array(state.pair_counts, dtype=int), self._p)
         pairs = zip(self._pair_object[: self._p], self._pair_anchor[: self._p], strict=True)
         self._pair_rows = {(int(o), int(a)): row for row, (o, a) in enumerate(pairs)}
+        self._home = np.zeros(len(self._counts), dtype=int)
+        self._home[self._pair_object[: self._p]] = self._pair_anchor[: self._p]  # any of its experiences will do
         self._compacted_at = max(self._p, INITIAL_CAPACITY)
         live = self._counts[: self._n] > 0
         self._tentative = set(np.flatnonzero(live & (self._counts[: self._n] < self.config.min_observations)).tolist())

@@ -39,6 +39,10 @@ class MapParts:
     def part_of(self, experience: int) -> int:
         return int(self._part[experience])
 
+    def labels(self) -> np.ndarray:
+        """The part of every experience (a view: valid until the next experience is added)."""
+        return self._part[: self._n]
+
     def members(self, part: int) -> np.ndarray:
         """The experiences of a part (a boolean mask over all)."""
         return self._part[: self._n] == part

@@ -10,7 +10,8 @@ guidance). A goal that cannot be planned (unknown, stale, ambiguous, out of reac
 
 An object goal must be seen to be reached: a parked car may have left since the map was made, and the map cannot
 know it until the robot looks. Every frame's observations of the goal's class are placed in the map (the robot's
-pose there, each moved from the surface the camera sees to the object's middle as the map's objects are); one within
+pose there, each moved from the surface the camera sees to the object's middle as the map's objects are), those
+whose stereo depth is good enough (`navigation.sighting_depth_sigma`); one within
 `navigation.confirm_radius` of the goal object, and nearer to it than to any other object of its class in the map,
 is a sighting. `navigation.sightings` frames with one see the goal object (a single far observation of a neighbour
 can land on it: stereo depth is metres off at 50 m); so does the map's own record, when the route is planned, that
@@ -33,6 +34,7 @@ from neoslam.config import NeoSLAMConfig
 from neoslam.errors import GoalError
 from neoslam.geometry import camera_points_to_robot
 from neoslam.loop.keyframes import object_centres
+from neoslam.mapping.object_map import depth_sigmas
 from neoslam.navigation.goals import Goal, ObjectQuery, parse_goal
 from neoslam.navigation.guidance import Guidance, Guide
 from neoslam.navigation.route import Route, RoutePlanner
@@ -100,10 +102,15 @@ class _Recalled:
 
     @classmethod
     def of(cls, frame: Frame, config: NeoSLAMConfig) -> _Recalled:
-        if not frame.observations:
+        """The frame's observations near enough for their depth to place them (`sighting_depth_sigma`)."""
+        sigmas = depth_sigmas(frame.observations, config.object_map) if frame.observations else np.zeros(0)
+        near = tuple(
+            o for o, s in zip(frame.observations, sigmas, strict=True) if s <= config.navigation.sighting_depth_sigma
+        )
+        if not near:
             return cls(frame.odometry_pose, (), np.zeros((0, 3)))
-        centres = camera_points_to_robot(object_centres(frame.observations, config.keyframes.footprints))
-        return cls(frame.odometry_pose, tuple(o.label for o in frame.observations), centres)
+        centres = camera_points_to_robot(object_centres(near, config.keyframes.footprints))
+        return cls(frame.odometry_pose, tuple(o.label for o in near), centres)
 
 
 @dataclass
