@@ -1,12 +1,12 @@
 """Closed-loop deliveries in the simulator (benchmarks/navigation.py, part `deliveries`): a robot starts on a mapped
 street with no prior pose, relocalises in the map, and drives by the guidance alone until it says the robot arrived.
 
-A delivery is planned from a seed (`plan_deliveries`): a start node on the true street graph and the direction it
-faces, and a goal of the goal language. The mix (GOAL_MIX): an object by id that a world object stands for, a class
-query (`nearest car`, the class drawn as often as the map holds it), an experience, a point on the streets (in the
-map's frame as the map draws that spot: placed from its nearest experience, `MappedDrive.drawn_on_map`) and `start of session 1` (the map's start: `start` alone is where the delivery's own
-session started). A removed-goal delivery names an object by id whose world object is
-taken out of the world before the robot starts.
+A delivery is planned from a seed (`plan_deliveries`): a start node on the true street graph and the direction it faces,
+and a goal of the goal language. The mix (GOAL_MIX): an object by id that a world object stands for, a class query
+(`nearest car`, the class drawn as often as the map holds it), an experience, a point on the streets (in the map's frame
+as the map draws that spot: placed from its nearest experience, `MappedDrive.drawn_on_map`) and `start of session 1`
+(the map's start: `start` alone is where the delivery's own session started). A removed-goal delivery names an object by
+id whose world object is taken out of the world before the robot starts.
 
 `run_delivery` drives it: a new session `NeoSLAM(config, stored=map)` (nothing written to disk) with a
 `GoalGuidance`; each frame the robot (benchmarks._robot) moves on the street graph from the guidance of the last

@@ -6,13 +6,13 @@ the next node. A turn sharper than SNAP_TURN_RAD stops it at the node and turns 
 takes a few frames), so that odometry and the camera see a turn, not a jump of heading.
 
 The controller (`choose_next`) reads only the guidance of the last frame: before the robot is localised it explores
-(drives on along the street; where the street forks, a seeded choice, never back where it came from unless it is a
-dead end); once a route is planned it takes the edge whose direction, in the world, best matches the guidance's
-bearing to the next waypoint turned into the world by the robot's true heading (the bearing is in the robot's frame:
-no map knowledge is needed to follow it), and turns round only for a waypoint nearly behind it. `looking` (at an
-object goal not yet seen) turns it in place towards the guidance's bearing, as a robot turns its camera to the
-object. `arrived`, `missing` and `unreachable` stop the robot.
-"""
+(drives on along the street; where the street forks, a seeded choice, never back where it came from unless it is a dead
+end); once a route is planned it takes the street whose direction, in the world, best matches the guidance's bearing to
+the next waypoint turned into the world by the robot's true heading (the bearing is in the robot's frame: no map
+knowledge is needed to follow it; a street's direction is from the node to where the street is STREET_AHEAD_M on, as a
+driver sees where a street leads), and turns round only for a waypoint nearly behind it. `looking` (at an object goal
+not yet seen) turns it in place towards the guidance's bearing, as a robot turns its camera to the object. `arrived`,
+`missing` and `unreachable` stop the robot."""
 
 from __future__ import annotations
 
@@ -30,16 +30,21 @@ __all__ = [
     "MAX_YAW_RATE",
     "SNAP_TURN_RAD",
     "STOPPING",
+    "STREET_AHEAD_M",
     "U_TURN_CONE_RAD",
     "Robot",
     "choose_next",
     "explore",
     "follow",
+    "street_ahead",
 ]
 
 SNAP_TURN_RAD = np.radians(25.0)  # a turn at a node up to this is taken while driving (a street's curve)
 MAX_YAW_RATE = np.radians(90.0)  # rad/s of a turn in place (a U-turn takes two seconds)
 U_TURN_CONE_RAD = np.radians(60.0)  # the robot turns round only for a waypoint this close to straight behind it
+# The controller judges a street by where it leads over this much: a driver sees a junction's streets, not their
+# first metre (a street that leaves a junction on a curve first points away from where it goes).
+STREET_AHEAD_M = 10.0
 STOPPING = frozenset({"arrived", "missing", "unreachable"})  # the guidance states that end a delivery
 LOOKING = "looking"  # the guidance state that turns the robot in place towards its bearing
 FOLLOWING = frozenset({"on_route", "replanned", "off_route"})  # the states with a bearing to follow
@@ -132,17 +137,35 @@ class Robot:
             self.yaw = _wrap(self.yaw + np.sign(turn) * largest)
 
 
+def street_ahead(graph: StreetGraph, node: int, first: int, reach_m: float = STREET_AHEAD_M) -> float:
+    """World yaw (rad) from `node` to where the street that leaves it towards `first` is `reach_m` on, taking at
+    each later node the way on that turns least (a dead end: where it ends)."""
+    previous, current = node, first
+    travelled = graph.length(node, first)
+    while travelled < reach_m:
+        onward = [int(n) for n in graph.neighbours[current] if n != previous]
+        if not onward:
+            break
+        heading = graph.heading(previous, current)
+        following = min(onward, key=lambda n: (abs(_wrap(graph.heading(current, n) - heading)), n))
+        travelled += graph.length(current, following)
+        previous, current = current, following
+    offset = graph.positions[current] - graph.positions[node]
+    return float(np.arctan2(offset[1], offset[0]))
+
+
 def follow(graph: StreetGraph, node: int, came_from: int, direction: float) -> int:
-    """The neighbour of `node` whose edge points nearest to `direction` (world yaw, rad; ties: the lowest id), going
-    back where it came from only when `direction` points back within U_TURN_CONE_RAD: a waypoint off to the side of
-    a street with no turn here is reached by driving on to the turn, not by turning round."""
+    """The neighbour of `node` whose street leads nearest to `direction` (world yaw, rad; `street_ahead`; ties: the
+    lowest id), going back where it came from only when `direction` points back within U_TURN_CONE_RAD: a waypoint
+    off to the side of a street with no turn here is reached by driving on to the turn, not by turning round."""
     neighbours = [int(n) for n in graph.neighbours[node]]
-    gaps = [abs(_wrap(graph.heading(node, n) - direction)) for n in neighbours]
+    leads = [street_ahead(graph, node, n) for n in neighbours]
+    gaps = [abs(_wrap(lead - direction)) for lead in leads]
     best = neighbours[int(np.argmin(gaps))]
     onward = [(gap, n) for gap, n in zip(gaps, neighbours, strict=True) if n != came_from]
     if best != came_from or not onward:
         return best
-    back = abs(_wrap(graph.heading(node, came_from) - direction))
+    back = gaps[neighbours.index(came_from)]
     return best if back <= U_TURN_CONE_RAD else min(onward)[1]
 
 

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from benchmarks import navigation
 from benchmarks._judging import _beside
-from benchmarks._robot import MAX_YAW_RATE, Robot, choose_next, explore, follow
-from benchmarks._street_graph import SPACING_M, street_graph
+from benchmarks._robot import MAX_YAW_RATE, Robot, choose_next, explore, follow, street_ahead
+from benchmarks._street_graph import SPACING_M, StreetGraph, street_graph
 
 
 def _line(corners: list[tuple[float, float]], step: float = 0.5) -> np.ndarray:
@@ -109,6 +109,25 @@ def test_the_controller_follows_the_bearing_and_turns_round_only_for_a_waypoint_
     onward = set(graph.neighbours[node].tolist()) - {west}  # east, and the south street (by a junction edge too)
     assert {explore(graph, node, west, np.random.default_rng(seed)) for seed in range(40)} == onward
     assert {east, south} <= onward
+
+
+def test_the_controller_takes_the_street_that_leads_to_the_waypoint_not_the_one_that_starts_towards_it():
+    """A junction at the origin: the street driven (from the south) goes on north, one turns back south-west, and
+    one leaves north-east on a curve and then runs west. A waypoint due west is reached by the curved street: its
+    first edge points away from the waypoint, but 10 m on it leads west."""
+    positions = np.array(
+        [(0, -3, 0), (0, 0, 0), (0, 3, 0), (0, 6, 0), (-2, -2, 0), (-4, -6, 0), (2, 2, 0), (1, 4.5, 0),
+         (-2, 5, 0), (-6, 5, 0), (-10, 5, 0)],
+        dtype=float,
+    )  # fmt: skip
+    edges = np.array([(0, 1), (1, 2), (2, 3), (1, 4), (4, 5), (1, 6), (6, 7), (7, 8), (8, 9), (9, 10)])
+    neighbours = tuple(
+        np.array(sorted({int(b) for a, b in edges if a == n} | {int(a) for a, b in edges if b == n})) for n in range(11)
+    )
+    graph = StreetGraph(positions, edges, neighbours)
+    assert np.degrees(street_ahead(graph, 1, 6)) > 110  # it leaves at 45 degrees and leads north-west to west
+    assert follow(graph, 1, 0, np.pi) == 6
+    assert follow(graph, 1, 0, -np.radians(120)) == 4  # a waypoint south-west: the street that goes there
 
 
 def test_an_object_between_two_streets_is_beside_both():
