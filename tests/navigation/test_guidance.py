@@ -4,6 +4,7 @@ plans again, no pose is `not_localised`, and a frame costs well under a millisec
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -197,3 +198,24 @@ def test_a_point_off_the_route_is_followed_on_to_and_a_robot_passing_beside_it_a
     driven.update(pose_at(62.0, 50.0, np.pi / 2))
     arrived = driven.update(pose_at(*point, np.pi / 2))
     assert arrived.state == "arrived" and arrived.goal_distance_m == pytest.approx(0.0)
+
+
+def test_a_route_that_turns_back_on_itself_is_followed_from_the_waypoint_the_robot_reached(planned):
+    """A route north along x = 0 to y = 14, back south 0.5 m beside itself, then east along y = 2. A robot that
+    turns round at y = 8 (as a car turns where it can) is nearer the route's way north than its way back; within
+    waypoint_reached of the waypoint it was guided to, it has reached it, and it is guided on south and east to the
+    end instead of back north."""
+    _, planned_route = planned
+    points = [(0, y) for y in range(-20, 15, 5)] + [(0, 14), (0.5, 10), (0.5, 5), (5, 2), (10, 2), (15, 2)]
+    poses = np.array([pose_at(x, y, 0.0) for x, y in points])
+    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(np.array(points, float), axis=0).T))])
+    route = dataclasses.replace(
+        planned_route, experiences=np.arange(len(points)), poses=poses, along_m=along, length_m=float(along[-1])
+    )
+    guide = Guide(route, CONFIG)
+    for y in np.arange(-20.0, 8.01, 1.0):
+        guide.update(pose_at(0.0, y, np.pi / 2))
+    back = [guide.update(pose_at(0.0, y, -np.pi / 2)) for y in np.arange(8.0, 2.0, -1.0)]
+    assert back[-1].waypoint > points.index((0.5, 5)) and abs(back[-1].bearing_rad) < np.radians(120)
+    east = [guide.update(pose_at(x, 2.0, 0.0)) for x in np.arange(0.0, 15.01, 0.5)]
+    assert east[-1].state == "arrived"

@@ -70,6 +70,14 @@ class NavigationConfig(Section):
         description="guidance: the next waypoint is the first route experience at least this far ahead of the "
         "robot along the route, m (experiences are about 5 m apart: the waypoint is one or two ahead)",
     )
+    waypoint_reached: float = Field(
+        3.0,
+        ge=0,
+        le=1000,
+        description="guidance: a robot this close to its next waypoint has reached it, m: it is followed on from "
+        "there (a route that turns back on itself passes its own earlier part, nearer to the robot than the part "
+        "it is on; 0: only by the projection)",
+    )
     off_route_distance: float = Field(
         12.0,
         gt=0,

@@ -5,7 +5,8 @@ is left, whether the robot has arrived, and a new route when it left this one or
 Each frame the robot's position is projected onto the route's segments in the ground plane, searched only near
 where it was (from the segment before the last one to `jump_distance + off_route_distance + look_ahead` metres
 ahead), so a frame costs the same on a route of 10 or 10,000 waypoints. The next waypoint is the first route
-experience at least `look_ahead` metres ahead of that projection along the route; waypoints only advance. The
+experience at least `look_ahead` metres ahead of that projection along the route; waypoints only advance, and a robot
+within `waypoint_reached` of its next waypoint (not the end) has reached it (the projection moves on to it). The
 route is planned again to the same goal (RoutePlanner.replan: from where the robot joins the map) when the robot is
 farther than `off_route_distance` from it, when its pose jumped by more than `jump_distance` since the previous
 frame (it was relocalised, or the map was corrected), or when it comes back localised off the route; never on other
@@ -141,7 +142,19 @@ class Guide:
         if not self._arrived and (jumped or away) and self._replan is not None:
             return self._planned_again(pose, "relocalised" if jumped or previous is None else "off_route")
         self._progress.segment, self._progress.along_m = segment, along
+        self._reach_waypoint(here)
         return self._guidance(pose, "off_route" if away else "on_route", off)
+
+    def _reach_waypoint(self, here: np.ndarray) -> None:
+        """Within `waypoint_reached` of the next waypoint, the robot is there: its progress moves on to it (where a
+        route turns back on itself, the projection finds the way there, nearer, and the waypoint is never passed).
+        Not the route's end: arrival there is `_at_end`'s, nearer than this."""
+        point = self._progress.waypoint
+        if point >= len(self._points) - 1 or self._along[point] <= self._progress.along_m:
+            return
+        if np.hypot(*(self._points[point] - here)) <= self.config.waypoint_reached:
+            self._progress.along_m = float(self._along[point])
+            self._progress.segment = point
 
     def _planned_again(self, pose: np.ndarray, reason: Literal["off_route", "relocalised"]) -> Guidance:
         assert self._replan is not None
