@@ -161,6 +161,18 @@ def test_a_truncated_map_is_refused_and_left_alone(cli, street, map_copy, tmp_pa
     assert _digest(map_copy) == before
 
 
+def test_a_map_given_with_a_trigger_is_refused_before_it_could_run(cli, street, map_copy, tmp_path):
+    """A map from elsewhere with a trigger that would delete keyframes at the run's first commit: one line, the map
+    byte for byte as it was, no results."""
+    with closing(sqlite3.connect(map_copy)) as connection:
+        connection.execute("CREATE TRIGGER evil AFTER INSERT ON links BEGIN DELETE FROM keyframes WHERE id < 5; END")
+        connection.commit()
+    before = _digest(map_copy)
+    result = cli.invoke("run", street, "--map", map_copy, "--out", tmp_path / "r")
+    cli.one_line_error(result, "map.db", "a trigger 'evil' on table 'links' that the map format does not define")
+    assert _digest(map_copy) == before and not (tmp_path / "r").exists()
+
+
 def test_a_map_made_with_another_config_is_refused(cli, street, map_copy, tmp_path):
     config = tmp_path / "other.yaml"
     config.write_text("keyframes:\n  spacing: 7.5\n")

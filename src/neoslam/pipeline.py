@@ -29,6 +29,7 @@ from neoslam.loop.keyframes import KeyframeBuilder
 from neoslam.mapping.experience_map import CellState, ExperienceMap, Revisit
 from neoslam.mapping.moving_objects import MovingObjectDetector
 from neoslam.mapping.object_map import MapObject, ObjectMap
+from neoslam.record_checks import FrameOrder
 from neoslam.relocalisation import StoredMapRelocalisation
 from neoslam.types import Frame, Keyframe, LoopClosure, MapState, SessionRecord, StoredClosure, Trajectory
 
@@ -104,6 +105,9 @@ class NeoSLAM:
         self.detected_closures: list[LoopClosure] = []  # accepted by the loop-closure detector
         self.loop_closures: list[LoopClosure] = []  # and by the experience map's grid-cell check
         self._previous_odometry: np.ndarray | None = None
+        self._frame_order = FrameOrder(
+            config.motion_limits, Frame
+        )  # what the API is given, checked as the CLI's files are
         self._grid_position = np.zeros(3)  # decoded grid-cell position unwrapped over the torus, metres
         self._grid_centre = self.grid_cells.centre
         self._object_vector_batch: list[tuple[np.ndarray, np.ndarray]] = []
@@ -131,7 +135,9 @@ class NeoSLAM:
             self.object_vector_cells.restore(stored.object_vector_weights, stored.object_vector_losses)
 
     def step(self, frame: Frame) -> np.ndarray:
-        """Process one frame (the paper's steps in order); returns the current pose estimate T_world_robot."""
+        """Process one frame (the paper's steps in order); returns the current pose estimate T_world_robot.
+        ValueError for a frame out of order or beyond `motion_limits` (nothing of it is taken)."""
+        self._frame_order.check(frame)
         travelled_m = self._integrate_path(frame)  # 3.3: head-direction and grid cells
         odometry = frame.odometry_pose
         observations = self.moving_objects.static(frame, self.keyframes.window)  # beyond the paper: no movers
@@ -352,6 +358,12 @@ class NeoSLAM:
         return (ids, *self.loop_detector.scores(keyframe))
 
     def result(self, frame_times_s: np.ndarray) -> RunResult:
+        """The run so far; `frame_times_s`, the wall time of each step, one per frame processed."""
+        if np.shape(frame_times_s) != (self._recorded,):
+            raise ValueError(
+                f"frame_times_s: expected one time per frame processed ({self._recorded}), got shape "
+                f"{np.shape(frame_times_s)}"
+            )
         self.experience_map.finish()  # links still waiting for the pose graph
         parts = self.experience_map.parts.labels()
         self.object_map.refresh(self.experience_map.graph.poses, True, parts)  # the last merges, on the final map

@@ -26,16 +26,32 @@ from contextlib import AbstractContextManager, contextmanager, suppress
 from dataclasses import dataclass
 from itertools import count
 
-__all__ = ["STOP_SIGNALS", "Graceful", "graceful", "install", "installed", "leave", "on_stop", "stop_note"]
+__all__ = [
+    "STOP_SIGNALS",
+    "Graceful",
+    "finish",
+    "graceful",
+    "install",
+    "installed",
+    "leave",
+    "on_stop",
+    "published",
+    "stop_note",
+]
 
 STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 DEFAULT_NOTE = "no output written"
+FINISHED_NOTE = "after the command had finished: its outputs are complete"
+# Extensions whose exit hooks must run: ray's stops the processes of the local cluster it started.
+_EXIT_HOOKS_NEEDED = ("ray",)
 
 _cleanups: dict[int, Callable[[], object]] = {}
 _notes: dict[int, Callable[[], object]] = {}
 _ids = count()
 _installed = False
 _graceful: Graceful | None = None
+_finished = False
+_published: list[str] = []  # outputs written whole (neoslam.io.atomic), for the line a stop prints
 
 
 def installed() -> bool:
@@ -71,6 +87,28 @@ def leave(code: int = 0) -> None:
         with suppress(OSError, ValueError):
             stream.flush()
     os._exit(code)
+
+
+def finish(code: int) -> None:
+    """The console script's command has returned with `code`, every output written and closed: end now, without
+    the interpreter's shutdown. That takes a second or more with torch and onnxruntime loaded, and Python gives the
+    stop signals back their default action in it, so a Ctrl-C then killed the process with no word. Until the
+    process ends a stop says the outputs are complete. Where an extension's exit hook must run (ray's), the
+    shutdown runs as usual. As a library call (no handler installed) it does nothing."""
+    global _finished
+    if not _installed:
+        return
+    _finished = True
+    if any(name in sys.modules for name in _EXIT_HOOKS_NEEDED):
+        return
+    leave(code)
+
+
+def published(path: object) -> None:
+    """An output is written whole: a stop from now on names it instead of saying "no output written" (the console
+    script only: a library's stops are its caller's)."""
+    if _installed:
+        _published.append(str(path))
 
 
 def on_stop(cleanup: Callable[[], None]) -> AbstractContextManager[None]:
@@ -131,8 +169,10 @@ def _stop_now(signum: int) -> None:
         with suppress(Exception):
             _cleanups[key]()
     _stop_children()
-    note = DEFAULT_NOTE
-    for key in sorted(_notes, reverse=True):
+    note = FINISHED_NOTE if _finished else DEFAULT_NOTE
+    if _published and not _finished:
+        note = f"wrote {', '.join(_published)} before it stopped"
+    for key in sorted(_notes, reverse=True) if not _finished else ():
         with suppress(Exception):
             given = _notes[key]()
             if given:

@@ -13,6 +13,8 @@ from typing import Literal
 
 import numpy as np
 
+from neoslam.record_checks import check_frame, check_observation
+
 __all__ = [
     "ObjectObservation",
     "Frame",
@@ -41,6 +43,9 @@ class ObjectObservation:
     patch: np.ndarray  # (h, w) uint8 grey appearance patch of the object in the left image
     depth_sigma: float | None = None  # std of the centre's depth, m, when the stereo front end measured it
 
+    def __post_init__(self) -> None:
+        check_observation(self)  # ValueError naming the field: a wrong value is refused where it enters
+
 
 @dataclass(frozen=True, slots=True)
 class Frame:
@@ -52,6 +57,9 @@ class Frame:
     linear_velocity: np.ndarray  # (3,) body frame, m/s
     angular_velocity: np.ndarray  # (3,) body frame, rad/s
     observations: tuple[ObjectObservation, ...] = ()
+
+    def __post_init__(self) -> None:
+        check_frame(self, ObjectObservation)  # ValueError naming the field
 
 
 @dataclass(frozen=True, slots=True)

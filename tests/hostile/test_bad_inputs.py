@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -14,6 +15,8 @@ import cv2
 import numpy as np
 import pytest
 import yaml
+
+from neoslam.text import read_yaml
 
 SMALL_FRAMES = 40  # a cut of the block route: enough to run end to end in a few seconds
 BOM = b"\xef\xbb\xbf"
@@ -478,3 +481,21 @@ def test_a_byte_order_mark_is_accepted_in_every_kitti_file(cli, kitti: Path):
     odometry = kitti_odometry(kitti)
     _with_bom(odometry)
     _ok(_run_kitti(cli, kitti, kitti.parent / "o", detections=kitti / "d.jsonl", odometry=odometry))
+
+
+def test_a_trajectory_whose_file_name_is_not_utf8_makes_a_dataset_that_reads_back(cli, tmp_path: Path):
+    """The dataset's name comes from the file name; its bytes that are not UTF-8 are written as \\xNN escapes, so
+    dataset.yaml is text and `run` reads it."""
+    trajectory = tmp_path / os.fsdecode(b"t\xff.txt")
+    trajectory.write_text("".join(f"{0.1 * k:.1f} {1.0 * k} 0 0 0 0 0 1\n" for k in range(40)))
+    cli.ok("simulate", "--trajectory", trajectory, "--out", tmp_path / "o", "-q")
+    meta = read_yaml(tmp_path / "o" / "dataset.yaml")
+    assert meta["name"] == "t\\xff" and meta["source"].endswith("t\\xff.txt")
+    cli.ok("run", tmp_path / "o", "--out", tmp_path / "r", "-q")
+
+
+def test_a_yaml_key_given_twice_is_refused_by_name(cli, dataset: Path, tmp_path: Path):
+    config = tmp_path / "twice.yaml"
+    config.write_text("keyframes:\n  spacing: 5.0\n  spacing: 7.5\n")
+    result = cli.invoke("run", dataset, "--config", config, "--out", tmp_path / "r")
+    cli.one_line_error(result, "twice.yaml:3", "duplicate key 'spacing' (first on line 2)")

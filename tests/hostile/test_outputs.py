@@ -218,3 +218,26 @@ def test_a_second_run_on_the_same_output_is_refused_while_the_first_writes(tmp_p
     finally:
         first.kill()
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_staging_left_by_a_killed_run_is_removed_by_the_next_one(tmp_path: Path) -> None:
+    """SIGKILL leaves `.OUT.partial-PID` (no clean-up runs): the next run into OUT removes it once its process is
+    gone; one of a live process is another run writing, and refused."""
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    out = tmp_path / "results"
+    left = tmp_path / f".results.partial-{dead.pid}"
+    (left / "plots").mkdir(parents=True)
+    (left / "metrics.json").write_text("{")
+    left_file = tmp_path / f".map.db.partial-{dead.pid}"
+    left_file.write_bytes(b"half")
+    with atomic_directory(out) as staging:
+        (staging / "metrics.json").write_text("{}")
+    with atomic_file(tmp_path / "map.db") as staging:
+        staging.write_bytes(b"whole")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["map.db", "results"]
+    live = tmp_path / f".again.partial-{os.getppid()}"
+    live.mkdir()
+    with pytest.raises(OutputError, match="another run"), atomic_directory(tmp_path / "again"):
+        pass
+    assert live.is_dir()

@@ -73,3 +73,30 @@ def test_an_open_progress_bar_is_seen_by_the_stop_handler() -> None:
         bar.update()
         assert _progress_bar_open()
     assert not _progress_bar_open()
+
+
+@pytest.mark.parametrize("delay_s", [0.0, 0.1, 0.4])
+def test_a_signal_once_the_outputs_are_written_never_says_no_output_and_never_kills_silently(
+    tmp_path: Path, delay_s: float
+) -> None:
+    """The command ends as soon as it has returned (no seconds of interpreter shutdown, in which Python gives the
+    signals back their default action): a stop after its output appeared finds it gone (exit 0) or says the
+    outputs are complete (130), or, between the output's rename and the command's return, names the output."""
+    command = [sys.executable, "-m", "neoslam", "simulate", "--route", "block", "--out", "o", "-q"]
+    process = subprocess.Popen(command, cwd=tmp_path, stderr=subprocess.PIPE, text=True, env=os.environ.copy())
+    try:
+        deadline = time.monotonic() + 60
+        while not (tmp_path / "o").exists() and process.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.005)
+        time.sleep(delay_s)
+        if process.poll() is None:
+            process.send_signal(signal.SIGINT)
+        _, stderr = process.communicate(timeout=STOP_WITHIN_S)
+    finally:
+        process.kill()
+    assert process.returncode in (0, 130), (process.returncode, stderr)
+    if process.returncode == 130:
+        assert (
+            stderr.splitlines()[-1] == "neoslam: interrupted; after the command had finished: its outputs are complete"
+        )
+    assert (tmp_path / "o" / "dataset.yaml").is_file()

@@ -38,8 +38,17 @@ def _frame(
         local = invert_pose(robot) @ np.array([x, y, 0.5, 1.0])
         centre = robot_points_to_camera(local[None, :3])[0]
         box = np.array([100.0, 100.0, 140.0, 130.0])
-        observations.append(ObjectObservation(label, 0.9, box, box - [20.0, 0, 20.0, 0], centre, np.zeros((16, 16))))
+        observations.append(
+            ObjectObservation(label, 0.9, box, box - [20.0, 0, 20.0, 0], centre, np.zeros((16, 16), np.uint8))
+        )
     return Frame(index, 0.1 * index, np.eye(4), np.zeros(3), np.zeros(3), tuple(observations))
+
+
+def _turned_right(pose: np.ndarray) -> np.ndarray:
+    """The robot turned 90 degrees to its right, in place (to face a car parked beside the street)."""
+    turned = pose.copy()
+    turned[:3, :3] = pose[:3, :3] @ np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    return turned
 
 
 def test_an_object_this_session_saw_before_it_relocalised_is_reached_one_it_never_saw_is_missing():
@@ -78,8 +87,9 @@ def test_a_robot_at_an_object_it_has_not_seen_is_turned_to_it_and_arrives_once_i
     assert np.isclose(looking.guidance.distance_m, 5.0, atol=0.5)
     assert looking.row()["bearing_deg"] == looking.guidance.bearing_rad * 180 / np.pi
     needed = NeoSLAMConfig().navigation.sightings
+    facing = _turned_right(robot)  # turned to the car on its right: the camera sees it ahead
     for index in range(6, 6 + needed):
-        guidance(state, _frame(index, robot, (("car", (60.0, -4.2)),)), robot)
+        guidance(state, _frame(index, facing, (("car", (60.0, -4.2)),)), facing)
     assert guidance.latest is not None and guidance.latest.state == "arrived"
     assert guidance.summary()["arrived_frame"] == 5 + needed
 
@@ -93,7 +103,7 @@ def test_frames_before_the_session_relocalised_that_saw_the_goal_count_once_it_h
     lost = _running(streets.builder.state())
     lost.session = SessionRecord(2, "later", 10, None)
     found = _running(streets.builder.state())
-    robot = found.experience_poses[streets.at(60, 0)]
+    robot = _turned_right(found.experience_poses[streets.at(60, 0)])  # facing the car
     odometry = robot.copy()
     odometry[0, 3] -= 20.0  # the same robot in the odometry's frame
     for recall, expected in ((100, "arrived"), (3, "looking")):
@@ -121,7 +131,7 @@ def test_an_observation_nearer_another_object_of_the_class_is_that_one():
     goal = builder.add_object("car", (60, -5, 0.5), seen_from)
     builder.add_object("car", (60, -8, 0.5), seen_from)
     state = _running(builder.state())
-    robot = state.experience_poses[streets.at(60, 0)]
+    robot = _turned_right(state.experience_poses[streets.at(60, 0)])  # facing the cars
     for seen, expected in (((60.0, -6.3), "looking"), ((60.0, -4.2), "arrived")):
         guidance = GoalGuidance(f"object {goal}", NeoSLAMConfig())
         states = []

@@ -22,7 +22,9 @@ from neoslam.viz.detections_strip import (
 
 def _frame(index: int, boxes: list[tuple[str, tuple[float, float, float, float], float]]) -> Frame:
     observations = tuple(
-        ObjectObservation(label, 0.9, np.array(box), np.array(box), np.array([0.0, 0.0, depth]), np.zeros((4, 4)))
+        ObjectObservation(
+            label, 0.9, np.array(box), np.array(box), np.array([0.0, 0.0, depth]), np.zeros((4, 4), np.uint8)
+        )
         for label, box, depth in boxes
     )
     return Frame(index, 0.1 * index, np.eye(4), np.zeros(3), np.zeros(3), observations)

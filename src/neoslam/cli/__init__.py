@@ -18,6 +18,11 @@ __all__ = ["app", "entry", "live", "maps", "runs", "sweeps"]
 
 
 def entry() -> None:
-    """The app, stopped cleanly by Ctrl-C, SIGTERM and SIGHUP at any point (see neoslam.stopping)."""
+    """The app, stopped cleanly by Ctrl-C, SIGTERM and SIGHUP at any point (see neoslam.stopping), and ended as soon
+    as it returns (`stopping.finish`)."""
     stopping.install()
-    app()
+    try:
+        app()
+    except SystemExit as done:
+        stopping.finish(done.code if isinstance(done.code, int) else 0 if done.code is None else 1)
+        raise

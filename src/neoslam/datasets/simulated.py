@@ -33,7 +33,7 @@ from neoslam.io.tables import numeric_column, read_table, write_table
 from neoslam.io.trajectory_files import read_tum, write_tum
 from neoslam.sim.detections import SimulatedDetection
 from neoslam.sim.simulator import SimulatedRecording
-from neoslam.text import read_yaml
+from neoslam.text import read_yaml, utf8_text
 from neoslam.types import Frame, ObjectObservation, Trajectory
 
 __all__ = [
@@ -65,8 +65,8 @@ def write_dataset(folder: Path, recording: SimulatedRecording) -> None:
     meta = {
         "format": FORMAT,
         "version": VERSION,
-        "name": recording.name,
-        "source": recording.source,
+        "name": utf8_text(recording.name),  # a file name that is not UTF-8 is written so that it reads back
+        "source": utf8_text(recording.source),
         "frames": n,
         "camera": recording.config.camera.model_dump(mode="json"),
         "simulator": recording.config.model_dump(mode="json"),

@@ -138,11 +138,22 @@ def _process_alive(pid: int) -> bool:
 
 
 def _refuse_concurrent_writer(target: Path) -> None:
-    """Another live run staging the same target: stop now rather than race it to the rename."""
+    """Another live run staging the same target: stop now rather than race it to the rename. A staging of it that a
+    killed run left (its process gone: SIGKILL gives no chance to clean up) is removed."""
+    stale = []
     for staging in target.parent.glob(f".{target.name}{_PARTIAL}*"):
         pid = staging.name.rsplit("-", 1)[-1]
-        if pid.isdigit() and int(pid) != os.getpid() and _process_alive(int(pid)):
+        if not pid.isdigit() or int(pid) == os.getpid():
+            continue
+        if _process_alive(int(pid)):
             raise OutputError(f"{target}: another run (process {pid}) is writing it; wait for it or name another")
+        stale.append(staging)
+    for staging in stale:
+        if staging.is_dir() and not staging.is_symlink():
+            shutil.rmtree(staging, ignore_errors=True)
+        else:
+            with suppress(OSError):
+                staging.unlink()
 
 
 def _staging_path(target: Path) -> Path:
@@ -213,6 +224,7 @@ def atomic_directory(target: Path, overwrite: bool = False, inputs: Iterable[Pat
             yield staging
             with _signals_deferred():  # a stop during the rename waits for it; the output is then whole
                 _publish_folder(staging, target, overwrite)
+                stopping.published(target)
     except BaseException:
         with _signals_deferred():
             remove_staging()
@@ -239,6 +251,7 @@ def atomic_file(target: Path, overwrite: bool = False, inputs: Iterable[Path | N
             yield staging
             with _signals_deferred():  # a stop during the rename waits for it; the output is then whole
                 _publish_file(staging, target, overwrite)
+                stopping.published(target)
     except BaseException:
         with _signals_deferred():
             remove_staging()

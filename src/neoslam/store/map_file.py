@@ -57,13 +57,14 @@ from neoslam import __version__
 from neoslam.config import NeoSLAMConfig
 from neoslam.errors import InputError, OutputError
 from neoslam.store.changes import WrittenState
-from neoslam.store.reading import CorruptRow, MapLimits, read_state
-from neoslam.store.schema import APPLICATION_ID, FORMAT_TAG, FORMAT_VERSION, STATEMENTS, TABLES
-from neoslam.store.validation import MAP_SECTIONS, locked, read_header, validate
+from neoslam.store.reading import CorruptRow, MapLimits, first_line, read_state
+from neoslam.store.schema import APPLICATION_ID, FORMAT_TAG, FORMAT_VERSION, STATEMENTS, TABLES, columns
+from neoslam.store.validation import MAP_SECTIONS, interrupted, locked, read_header, validate
 from neoslam.types import MapState
 
 __all__ = ["MAP_SECTIONS", "MapFile"]
 
+_PROGRESS_STEPS = 100_000  # SQLite virtual-machine steps between the signal handlers' turns (well under 0.1 s)
 _BUSY_TIMEOUT_S = 0.25  # a map in use stays locked for the whole run: waiting longer would not help
 _SCRATCH = "neoslam-map-"  # private copies of maps read-only: neoslam-map-<pid>-<random> in the temporary folder
 
@@ -101,7 +102,7 @@ class MapFile:
         partial = path.with_name(f".{path.name}.partial-{os.getpid()}")
         partial.unlink(missing_ok=True)
         try:
-            connection = sqlite3.connect(partial, isolation_level=None)
+            connection = _hardened(sqlite3.connect(partial, isolation_level=None))
             try:
                 _make_schema(connection, config)
             finally:
@@ -130,6 +131,13 @@ class MapFile:
             validate(connection, path, config)
             state = _read_state(connection, path, limits)
             seen = _summary(connection, path)
+        except InputError as error:
+            connection.close()
+            _remove(scratch)
+            log = _side_file(path, "-wal")
+            if scratch is None or not log.exists():
+                raise
+            raise InputError(path, f"{error.problem}, as read with the log {log.name} beside it") from None
         except BaseException:
             connection.close()
             _remove(scratch)
@@ -151,7 +159,11 @@ class MapFile:
     def __exit__(
         self, kind: type[BaseException] | None, value: BaseException | None, traceback: TracebackType | None
     ) -> None:
-        self.close()
+        if value is None:
+            self.close()
+            return
+        with suppress(OutputError):  # the error on the way out says what went wrong; a full disk fails both
+            self.close()
 
     @property
     def _open_connection(self) -> sqlite3.Connection:
@@ -186,10 +198,13 @@ class MapFile:
                 connection.executemany(STATEMENTS[statement], rows)
             connection.execute("COMMIT")
         except BaseException as error:
-            if connection.in_transaction:
-                connection.execute("ROLLBACK")
-            if isinstance(error, sqlite3.OperationalError):
-                raise OutputError(f"{self.path}: cannot write the map ({error})") from error
+            with suppress(sqlite3.Error):  # a full disk may refuse the rollback too; SQLite undoes it on close
+                if connection.in_transaction:
+                    connection.execute("ROLLBACK")
+            if isinstance(error, sqlite3.Error) and not interrupted(error):
+                raise OutputError(
+                    f"{self.path}: cannot write the map ({_writing_problem(error)}); it is as it was at its last commit"
+                ) from None
             raise
         self._written = written
 
@@ -202,10 +217,25 @@ class MapFile:
             if not self.read_only:
                 connection.execute("PRAGMA wal_checkpoint(TRUNCATE)")
                 connection.execute("PRAGMA journal_mode = DELETE")
+        except sqlite3.Error as error:
+            if interrupted(error):
+                raise KeyboardInterrupt from None
+            raise OutputError(
+                f"{self.path}: the map is whole up to its last commit, but its log {self.path.name}-wal could not "
+                f"be folded into it ({_writing_problem(error)}); the next run that opens the map does it"
+            ) from None
         finally:
-            connection.close()
+            with suppress(sqlite3.Error):  # the log stays beside the map when it cannot be folded in
+                connection.close()
             _remove(self._scratch)
             self._scratch = None
+
+
+def _writing_problem(error: sqlite3.Error) -> str:
+    """What SQLite's refusal to write means, in one line."""
+    if isinstance(error, sqlite3.OperationalError) and "full" in str(error):
+        return "the disk is full"
+    return first_line(str(error))
 
 
 # Reading
@@ -217,10 +247,12 @@ def _read_state(connection: sqlite3.Connection, path: Path, limits: MapLimits) -
         return read_state(connection, limits)
     except CorruptRow as error:
         raise InputError(path, f"corrupt map file ({error})") from None
-    except sqlite3.DatabaseError as error:
+    except sqlite3.Error as error:
+        if interrupted(error):
+            raise KeyboardInterrupt from None
         if locked(error):
             raise InputError(path, "in use by another run (the map file is locked)") from None
-        raise InputError(path, f"corrupt map file ({error})") from None
+        raise InputError(path, f"corrupt map file ({first_line(str(error))})") from None
     except (ValueError, KeyError, TypeError, OverflowError) as error:  # a row the checks did not foresee
         raise InputError(path, f"corrupt map file ({error})") from None
     except MemoryError:
@@ -230,12 +262,14 @@ def _read_state(connection: sqlite3.Connection, path: Path, limits: MapLimits) -
 def _summary(connection: sqlite3.Connection, path: Path) -> tuple[object, ...]:
     """What any commit changes (every commit writes its session's row), to tell whether the file changed."""
     try:
-        sessions = connection.execute("SELECT * FROM sessions ORDER BY id").fetchall()
+        sessions = connection.execute(f"SELECT {columns('sessions')} FROM sessions ORDER BY id").fetchall()
         counts = connection.execute(
             "SELECT (SELECT count(*) FROM keyframes), (SELECT count(*) FROM experiences), (SELECT count(*) FROM links)"
         ).fetchone()
-    except sqlite3.DatabaseError as error:
-        raise InputError(path, f"corrupt map file ({error})") from None
+    except sqlite3.Error as error:
+        if interrupted(error):
+            raise KeyboardInterrupt from None
+        raise InputError(path, f"corrupt map file ({first_line(str(error))})") from None
     return tuple(sessions), tuple(counts)
 
 
@@ -270,7 +304,7 @@ def _reader(path: Path, header: bytes) -> tuple[sqlite3.Connection, Path | None]
     wal_mode = header[18] == 2 or header[19] == 2
     if not wal_mode and not any(_side_file(path, s).exists() for s in ("-wal", "-journal", "-shm")):
         uri = f"file:{quote(str(path.absolute()))}?mode=ro"
-        return sqlite3.connect(uri, uri=True, isolation_level=None, timeout=_BUSY_TIMEOUT_S), None
+        return _hardened(sqlite3.connect(uri, uri=True, isolation_level=None, timeout=_BUSY_TIMEOUT_S)), None
     _sweep_scratch()
     scratch = Path(tempfile.mkdtemp(prefix=f"{_SCRATCH}{os.getpid()}-"))
     copy = scratch / "map.sqlite"
@@ -279,7 +313,7 @@ def _reader(path: Path, header: bytes) -> tuple[sqlite3.Connection, Path | None]
         for suffix in ("-wal", "-journal"):
             with suppress(FileNotFoundError):  # none beside it, or gone meanwhile
                 shutil.copyfile(_side_file(path, suffix), _side_file(copy, suffix))
-        return sqlite3.connect(copy, isolation_level=None, timeout=_BUSY_TIMEOUT_S), scratch
+        return _hardened(sqlite3.connect(copy, isolation_level=None, timeout=_BUSY_TIMEOUT_S)), scratch
     except (OSError, sqlite3.Error) as error:
         _remove(scratch)
         raise InputError(path, f"cannot be read ({error})") from None
@@ -288,7 +322,7 @@ def _reader(path: Path, header: bytes) -> tuple[sqlite3.Connection, Path | None]
 def _writer(path: Path, config: NeoSLAMConfig) -> sqlite3.Connection:
     """The connection a run writes with: write-ahead log, the configured durability, and an exclusive lock held
     until close (one process writes a map at a time; no shared-memory file beside it)."""
-    connection = sqlite3.connect(path, isolation_level=None, timeout=_BUSY_TIMEOUT_S)
+    connection = _hardened(sqlite3.connect(path, isolation_level=None, timeout=_BUSY_TIMEOUT_S))
     try:
         connection.execute("PRAGMA locking_mode = EXCLUSIVE")
         mode = connection.execute("PRAGMA journal_mode = WAL").fetchone()[0]
@@ -299,10 +333,27 @@ def _writer(path: Path, config: NeoSLAMConfig) -> sqlite3.Connection:
         connection.execute("COMMIT")
     except sqlite3.Error as error:
         connection.close()
+        if interrupted(error):
+            raise KeyboardInterrupt from None
         if locked(error):
             raise InputError(path, "in use by another run (the map file is locked)") from None
-        raise InputError(path, f"cannot be opened for writing ({error})") from None
+        raise InputError(path, f"cannot be opened for writing ({first_line(str(error))})") from None
     return connection
+
+
+def _hardened(connection: sqlite3.Connection) -> sqlite3.Connection:
+    """A connection fit for a file from anywhere: SQL in its schema is not trusted (`trusted_schema` off; defensive
+    mode too where Python can set it, 3.12 on), and every PROGRESS_STEPS steps of a statement Python's signal
+    handlers get a turn, so that Ctrl-C stops a statement that runs long (SQLite then says `interrupted`)."""
+    connection.execute("PRAGMA trusted_schema = OFF")
+    if hasattr(connection, "setconfig"):
+        connection.setconfig(sqlite3.SQLITE_DBCONFIG_DEFENSIVE, True)
+    connection.set_progress_handler(_signals_turn, _PROGRESS_STEPS)
+    return connection
+
+
+def _signals_turn() -> int:
+    return 0  # 0: go on; a signal's handler runs before this returns (and, raising, interrupts the statement)
 
 
 def _make_schema(connection: sqlite3.Connection, config: NeoSLAMConfig) -> None:

@@ -18,7 +18,19 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from neoslam.store.schema import F4, F8, FLOAT_DTYPES, I4, POSE, POSE_BLOCK, U1, VECTOR, decode, read_name
+from neoslam.store.schema import (
+    F4,
+    F8,
+    FLOAT_DTYPES,
+    I4,
+    POSE,
+    POSE_BLOCK,
+    U1,
+    VECTOR,
+    columns,
+    decode,
+    read_name,
+)
 from neoslam.types import (
     Experience,
     HebbianTrace,
@@ -31,7 +43,9 @@ from neoslam.types import (
     StoredClosure,
 )
 
-__all__ = ["CorruptRow", "MapLimits", "read_state"]
+__all__ = ["CorruptRow", "MapLimits", "first_line", "read_state"]
+
+_MESSAGE_CHARS = 200  # SQLite's complaint about a damaged file is clipped to its first line and this many characters
 
 _MAX_ID = 2**31 - 1  # observation keys pack an object and an experience id in 32 bits each
 _MAX_JSON_DEPTH = 4  # labels and shapes are flat lists; deeper nesting is not a map's, and json recurses on it
@@ -54,6 +68,16 @@ class MapLimits:
     head_direction_cells: int | None = None
     epochs: int | None = None
     object_vector_shapes: Callable[[], Mapping[str, tuple[int, ...]]] | None = None
+
+
+def _refused(table: str, error: sqlite3.Error) -> Exception:
+    """A CorruptRow of SQLite's first complaint about a table (a file may make it repeat one for every page); a
+    lock stays SQLite's error, and a statement a signal interrupted is the KeyboardInterrupt it was."""
+    if isinstance(error, sqlite3.OperationalError) and str(error) == "interrupted":
+        return KeyboardInterrupt()
+    if "locked" in str(error):
+        return error
+    return CorruptRow(table, None, first_line(str(error)))
 
 
 class _Row:
@@ -151,27 +175,36 @@ def _depth(text: str) -> int:
     return deepest
 
 
+def first_line(text: str) -> str:
+    """The first line of a message, clipped (SQLite may list a complaint for every page of a damaged file)."""
+    line = text.strip().splitlines()[0] if text.strip() else text
+    return line if len(line) <= _MESSAGE_CHARS else f"{line[: _MESSAGE_CHARS - 3]}..."
+
+
 def read_state(connection: sqlite3.Connection, limits: MapLimits = MapLimits()) -> MapState:
     """Everything a map file holds; CorruptRow for a row that holds it wrongly (sqlite3.DatabaseError for a file
     SQLite cannot read)."""
 
     def rows(sql: str) -> Iterator[tuple[Any, ...]]:
-        """The rows of a query, a value SQLite cannot give (text that is not UTF-8) naming the table."""
-        cursor = connection.execute(sql)
+        """The rows of a query; SQLite's refusal of one (text that is not UTF-8, a damaged page) names the table
+        (a lock is the caller's to report)."""
+        table = sql.split(" FROM ")[1].split()[0]
+        try:
+            cursor = connection.execute(sql)
+        except sqlite3.Error as error:
+            raise _refused(table, error) from None
         while True:
             try:
                 row = cursor.fetchone()
-            except sqlite3.OperationalError as error:
-                if "decode" not in str(error):
-                    raise
-                raise CorruptRow(sql.split(" FROM ")[1].split()[0], None, str(error)) from None
+            except sqlite3.Error as error:
+                raise _refused(table, error) from None
             if row is None:
                 return
             yield row
 
     state = MapState()
     check = _Row("sessions")
-    for session_id, name, frames, relocalised in rows("SELECT * FROM sessions ORDER BY id"):
+    for session_id, name, frames, relocalised in rows(f"SELECT {columns('sessions')} FROM sessions ORDER BY id"):
         check.at(id=session_id)
         if not isinstance(name, str | bytes):
             check.fail(f"name is {_kind(name)}, not text")
@@ -196,7 +229,7 @@ def read_state(connection: sqlite3.Connection, limits: MapLimits = MapLimits()) 
 def _read_keyframes(rows, state: MapState) -> None:
     check = _Row("keyframes")
     for kf_id, frame, experience, pose, n, centers, labels, height, width, patches, provisional, covariances in rows(
-        "SELECT * FROM keyframes ORDER BY id"
+        f"SELECT {columns('keyframes')} FROM keyframes ORDER BY id"
     ):
         check.at(id=kf_id)
         n = check.integer(n, "objects")
@@ -225,7 +258,7 @@ def _read_experiences(rows, state: MapState, sessions: set[int]) -> None:
     check = _Row("experiences")
     keyframes = {keyframe.id for keyframe in state.keyframes}
     for exp_id, session, frame, grid, heading, pose, linear, angular, keyframe in rows(
-        "SELECT * FROM experiences ORDER BY id"
+        f"SELECT {columns('experiences')} FROM experiences ORDER BY id"
     ):
         check.at(id=exp_id)
         if exp_id != len(state.experiences):
@@ -271,7 +304,7 @@ def _read_graph(rows, state: MapState, sessions: set[int]) -> None:
     last = len(state.experiences) - 1
     check = _Row("links")
     for position, (link_id, source, target, relative, kind, distance) in enumerate(
-        rows("SELECT * FROM links ORDER BY id")
+        rows(f"SELECT {columns('links')} FROM links ORDER BY id")
     ):
         check.at(id=link_id)
         _check_position(check, link_id, position)
@@ -288,7 +321,7 @@ def _read_graph(rows, state: MapState, sessions: set[int]) -> None:
         )
     check = _Row("closures")
     for position, (closure_id, session, match_session, *numbers, relative) in enumerate(
-        rows("SELECT * FROM closures ORDER BY id")
+        rows(f"SELECT {columns('closures')} FROM closures ORDER BY id")
     ):
         check.at(id=closure_id)
         _check_position(check, closure_id, position)
@@ -312,7 +345,7 @@ def _read_objects(rows, experiences: int) -> ObjectMapState:
     labels, sums, weights, counts = [], [], [], []
     check = _Row("objects")
     for position, (object_id, label, object_sums, weight, count) in enumerate(
-        rows("SELECT * FROM objects ORDER BY id")
+        rows(f"SELECT {columns('objects')} FROM objects ORDER BY id")
     ):
         check.at(id=object_id)
         _check_position(check, object_id, position)
@@ -322,7 +355,9 @@ def _read_objects(rows, experiences: int) -> ObjectMapState:
         counts.append(check.integer(count, "count"))
     owners, anchors, pair_sums, pair_weights, pair_counts = [], [], [], [], []
     check = _Row("object_observations")
-    for owner, anchor, observed, weight, count in rows("SELECT * FROM object_observations ORDER BY object, experience"):
+    for owner, anchor, observed, weight, count in rows(
+        f"SELECT {columns('object_observations')} FROM object_observations ORDER BY object, experience"
+    ):
         check.at(object=owner, experience=anchor)
         owners.append(check.integer(owner, "object", 0, len(labels) - 1))
         anchors.append(check.integer(anchor, "experience", 0, experiences - 1))
@@ -349,7 +384,7 @@ def _read_hebbian(rows, state: MapState, limits: MapLimits) -> None:
     hd_cells = limits.head_direction_cells or _MAX_ID
     check = _Row("hebbian")
     for keyframe, gc_n, gc_indices, gc_weights, hd_n, hd_indices, hd_weights, x, y, z, hd_peak, strength in rows(
-        "SELECT * FROM hebbian ORDER BY keyframe"
+        f"SELECT {columns('hebbian')} FROM hebbian ORDER BY keyframe"
     ):
         check.at(keyframe=keyframe)
         if check.integer(keyframe, "keyframe") not in keyframes:
@@ -379,7 +414,7 @@ def _read_object_vector(rows, state: MapState, limits: MapLimits) -> None:
     expected: Mapping[str, tuple[int, ...]] | None = None
     check = _Row("object_vector")
     for position, (stored_position, name, dtype, shape, data) in enumerate(
-        rows("SELECT * FROM object_vector ORDER BY position")
+        rows(f"SELECT {columns('object_vector')} FROM object_vector ORDER BY position")
     ):
         check.at(position=stored_position)
         if expected is None and limits.object_vector_shapes is not None:
@@ -397,7 +432,9 @@ def _read_object_vector(rows, state: MapState, limits: MapLimits) -> None:
         missing = sorted(expected.keys() - state.object_vector_weights.keys())
         check.at(position=len(state.object_vector_weights)).fail(f"missing: OVCN parameter {missing[0]!r}")
     check = _Row("object_vector_losses")
-    for position, (epoch, loss) in enumerate(rows("SELECT * FROM object_vector_losses ORDER BY epoch")):
+    for position, (epoch, loss) in enumerate(
+        rows(f"SELECT {columns('object_vector_losses')} FROM object_vector_losses ORDER BY epoch")
+    ):
         check.at(epoch=epoch)
         _check_position(check, epoch, position)
         if limits.epochs is not None and position >= limits.epochs:

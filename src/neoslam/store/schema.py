@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import json
 import math
+import sqlite3
 from collections.abc import Mapping
+from functools import cache
 from typing import Any
 
 import numpy as np
@@ -29,6 +31,7 @@ __all__ = [
     "FORMAT_VERSION",
     "APPLICATION_ID",
     "TABLES",
+    "columns",
     "F8",
     "F4",
     "I4",
@@ -117,6 +120,19 @@ TABLES: dict[str, str] = {
     ),
     "object_vector_losses": "CREATE TABLE object_vector_losses (epoch INTEGER PRIMARY KEY, loss REAL NOT NULL)",
 }
+
+
+@cache
+def columns(table: str) -> str:
+    """A table's columns by name, in the format's order, for a SELECT (a map's rows are read by column name)."""
+    reference = sqlite3.connect(":memory:")
+    try:
+        reference.execute(TABLES[table])
+        return ", ".join(
+            f'"{name}"' for (name,) in reference.execute("SELECT name FROM pragma_table_info(?)", (table,))
+        )
+    finally:
+        reference.close()
 
 
 def encode(array: Any, dtype: np.dtype, shape: tuple[int, ...] | None = None, what: str = "array") -> bytes:

@@ -1,6 +1,12 @@
 """Whether a file is a NeoSLAM map this run may open (see neoslam.store.map_file): the file header, checked before
-connecting, then the meta table, the tables and the config, checked on a connection. Every refusal is an InputError
-naming one problem; nothing here writes to the file.
+connecting, then the meta table, the schema, the version and the config, checked on a connection. Every refusal is
+an InputError naming one problem; nothing here writes to the file.
+
+A map is a file users pass around, so it is untrusted input: a trigger in it would run its own SQL at the first
+commit (deleting keyframes, or looping for ever), a view or an index could be made to do the same on reading, and a
+table rebuilt with its columns in another order would be read wrongly. The schema must be exactly the format's: no
+trigger, view, index or table the format does not define, and every table's columns in the format's names, types,
+constraints and order (`check_schema`); the connections run with `trusted_schema` off (neoslam.store.map_file).
 """
 
 from __future__ import annotations
@@ -10,17 +16,20 @@ import os
 import sqlite3
 import stat
 from contextlib import suppress
+from functools import lru_cache
 from pathlib import Path
 
 from neoslam import __version__
 from neoslam.config import MAP_SECTIONS, NeoSLAMConfig
 from neoslam.errors import InputError
+from neoslam.store.reading import first_line
 from neoslam.store.schema import APPLICATION_ID, FORMAT_TAG, FORMAT_VERSION, TABLES, config_difference
 
-__all__ = ["MAP_SECTIONS", "read_header", "validate", "locked"]
+__all__ = ["MAP_SECTIONS", "check_schema", "interrupted", "locked", "read_header", "validate"]
 
 
 _SQLITE_MAGIC = b"SQLite format 3\x00"
+_NAME_CHARS = 60  # a schema object's name is clipped to this in a message (a file may give it any length)
 _HEADER_SIZE = 100
 _EXTENDED = "a map is extended with the config it was made with"
 
@@ -132,6 +141,7 @@ def validate(connection: sqlite3.Connection, path: Path, config: NeoSLAMConfig) 
         missing = [table for table in TABLES if table not in tables]
         if missing:
             raise InputError(path, f"corrupt map file (no table {missing[0]})")
+        check_schema(connection, path)
         if meta.get("neoslam_version") != __version__:
             raise InputError(
                 path,
@@ -150,10 +160,87 @@ def validate(connection: sqlite3.Connection, path: Path, config: NeoSLAMConfig) 
         problems = [row[0] for row in connection.execute("PRAGMA quick_check")]
         if problems != ["ok"]:
             raise InputError(path, f"corrupt map file ({problems[0]})")
-    except sqlite3.DatabaseError as error:
+    except sqlite3.Error as error:
+        if interrupted(error):
+            raise KeyboardInterrupt from None
         if locked(error):
             raise InputError(path, "in use by another run (the map file is locked)") from None
-        raise InputError(path, f"corrupt map file ({error})") from None
+        raise InputError(path, f"corrupt map file ({first_line(str(error))})") from None
+
+
+def check_schema(connection: sqlite3.Connection, path: Path) -> None:
+    """Refuse a schema that is not exactly the format's: an object it does not define (trigger, view, index, table),
+    or a table whose columns (name, type, NOT NULL, primary key, order) or definition differ."""
+    expected = _format_schema()
+    found = connection.execute("SELECT type, name, tbl_name, sql FROM sqlite_master ORDER BY rowid").fetchall()
+    for kind, name, table, sql in found:
+        if (kind, name) not in expected:
+            where = "" if kind == "table" or name == table else f" on table {_clipped(table)}"
+            article = "an" if kind[0] in "aeiou" else "a"
+            raise InputError(
+                path,
+                f"{article} {kind} {_clipped(name)}{where} that the map format does not define (a map holds only the "
+                "format's tables: one given with more could run its own SQL when it is written to)",
+            )
+        if kind == "table":
+            columns, wanted = _columns(connection, name), expected[(kind, name)][1]
+            if [column[0] for column in columns] != [column[0] for column in wanted]:
+                raise InputError(
+                    path, f"table {name}: columns {_listed(columns)} differ from the format's {_listed(wanted)}"
+                )
+            for column, format_column in zip(columns, wanted, strict=True):
+                if column != format_column:
+                    raise InputError(
+                        path,
+                        f"table {name}: columns ({_clipped(column[0])} is {_declared(column)}) differ in type or "
+                        f"constraint from the format's ({_declared(format_column)})",
+                    )
+        if sql != expected[(kind, name)][0]:
+            what = "" if kind == "table" else f"its {kind} {_clipped(name)} "
+            raise InputError(path, f"table {table}: {what}defined otherwise than the format's (its constraints)")
+
+
+@lru_cache(maxsize=1)
+def _format_schema() -> dict[tuple[str, str], tuple[str | None, tuple[tuple[object, ...], ...]]]:
+    """(type, name) -> (sql, columns) of every schema object of a map as the format makes it."""
+    reference = sqlite3.connect(":memory:")
+    try:
+        for statement in TABLES.values():
+            reference.execute(statement)
+        rows = reference.execute("SELECT type, name, sql FROM sqlite_master").fetchall()
+        return {(kind, name): (sql, _columns(reference, name) if kind == "table" else ()) for kind, name, sql in rows}
+    finally:
+        reference.close()
+
+
+def _columns(connection: sqlite3.Connection, table: str) -> tuple[tuple[object, ...], ...]:
+    """(name, declared type, NOT NULL, primary-key position) of each column of a table, in order."""
+    rows = connection.execute('SELECT name, type, "notnull", pk FROM pragma_table_xinfo(?)', (table,)).fetchall()
+    return tuple(tuple(row) for row in rows)
+
+
+def _declared(column: tuple[object, ...]) -> str:
+    _, kind, not_null, key = column
+    return " ".join(
+        str(part) for part in (kind or "untyped", "NOT NULL" if not_null else "", "PRIMARY KEY" if key else "") if part
+    )
+
+
+def _listed(columns: tuple[tuple[object, ...], ...]) -> str:
+    names = ", ".join(_clipped(str(column[0])) for column in columns[:20])
+    more = f", and {len(columns) - 20} more" if len(columns) > 20 else ""
+    return f"({names}{more})"
+
+
+def _clipped(name: object) -> str:
+    text = repr(str(name))
+    return text if len(text) <= _NAME_CHARS else f"{text[: _NAME_CHARS - 4]}...'"
+
+
+def interrupted(error: BaseException) -> bool:
+    """Whether SQLite stopped a statement because a signal arrived while it ran (a progress handler's turn:
+    neoslam.store.map_file): Ctrl-C, which must stop the run, not read as a damaged file."""
+    return isinstance(error, sqlite3.OperationalError) and str(error) == "interrupted"
 
 
 def locked(error: sqlite3.Error) -> bool:
