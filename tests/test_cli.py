@@ -599,6 +599,17 @@ def test_missing_detector_model_is_one_line(cli, shared_data: Path, tmp_path: Pa
     _assert_one_line_error(result, ["nowhere.onnx", "YOLOX-ONNX-TFLite-Sample"])
 
 
+def test_a_model_path_of_megabytes_is_cut_in_the_one_line(cli, shared_data: Path, tmp_path: Path) -> None:
+    """A value given at any length (here a 10 MB model path in a config file) is cut in the middle of the line."""
+    config = tmp_path / "long.yaml"
+    config.write_text(f"perception:\n  detector:\n    model: {'x' * 10_000_000}.onnx\n")
+    result = cli.invoke(
+        "run", shared_data / "kitti_mini", "--sequence", "06", "--config", config, "--out", tmp_path / "o"
+    )
+    _assert_one_line_error(result, ["characters cut", ".onnx"])
+    assert len(result.stderr) < 1100
+
+
 def test_image_options_need_image_inputs(cli, workspace: Path, tmp_path: Path) -> None:
     result = cli.invoke("run", workspace / "data", "--sequence", "06", "--out", tmp_path / "o", "-q")
     _assert_one_line_error(result, ["--sequence", "apply to image inputs, not a simulated dataset"])

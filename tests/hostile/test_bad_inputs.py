@@ -9,6 +9,7 @@ import csv
 import json
 import os
 import shutil
+import zlib
 from pathlib import Path
 
 import cv2
@@ -16,6 +17,9 @@ import numpy as np
 import pytest
 import yaml
 
+from neoslam.datasets.kitti import read_grey_image
+from neoslam.errors import InputError
+from neoslam.io.image_header import image_size, oversized
 from neoslam.text import read_yaml
 
 SMALL_FRAMES = 40  # a cut of the block route: enough to run end to end in a few seconds
@@ -499,3 +503,30 @@ def test_a_yaml_key_given_twice_is_refused_by_name(cli, dataset: Path, tmp_path:
     config.write_text("keyframes:\n  spacing: 5.0\n  spacing: 7.5\n")
     result = cli.invoke("run", dataset, "--config", config, "--out", tmp_path / "r")
     cli.one_line_error(result, "twice.yaml:3", "duplicate key 'spacing' (first on line 2)")
+
+
+def _png_claiming(width: int, height: int) -> bytes:
+    """A PNG whose header claims width x height pixels (8-bit grey) with no image data to speak of."""
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return len(body).to_bytes(4, "big") + kind + body + zlib.crc32(kind + body).to_bytes(4, "big")
+
+    header = width.to_bytes(4, "big") + height.to_bytes(4, "big") + bytes([8, 0, 0, 0, 0])
+    data = chunk(b"IDAT", zlib.compress(b"\0" * 64))
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + data + chunk(b"IEND", b"")
+
+
+def test_an_image_claiming_a_billion_pixels_is_refused_from_its_header(tmp_path: Path):
+    path = tmp_path / "000000.png"
+    path.write_bytes(_png_claiming(32000, 32000))
+    with pytest.raises(InputError, match=r"32000x32000 pixels in its header, more than the 128 megapixels"):
+        read_grey_image(path)
+
+
+def test_the_size_of_a_jpeg_is_read_from_its_frame_header():
+    ok, encoded = cv2.imencode(".jpg", np.zeros((48, 64), np.uint8))
+    data = bytearray(encoded.tobytes())
+    assert ok and image_size(bytes(data)) == (64, 48)
+    frame = data.index(b"\xff\xc0")
+    data[frame + 5 : frame + 9] = (40000).to_bytes(2, "big") + (50000).to_bytes(2, "big")
+    assert image_size(bytes(data)) == (50000, 40000) and "50000x40000" in oversized(bytes(data))

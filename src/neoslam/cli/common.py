@@ -72,6 +72,9 @@ RerunOption = Annotated[
 ]
 
 
+MESSAGE_CHARS = 1000  # an error line is cut to this many characters
+
+
 def say(text: object, err: bool = False, nl: bool = True) -> None:
     """Print a line; a file name that is not UTF-8 (kept by Python as surrogate escapes) is shown with its bytes
     escaped (seq\\xff), where printing it as it is would fail."""
@@ -82,8 +85,19 @@ def say(text: object, err: bool = False, nl: bool = True) -> None:
 def fail(error: NeoSLAMError | OSError) -> None:
     # OSError: a folder that cannot be written, a disk that is full; the user can fix these too.
     message = f"{error.filename}: {error.strerror}" if isinstance(error, OSError) and error.filename else error
-    say(f"neoslam: error: {message}", err=True)
+    say(f"neoslam: error: {one_line(str(message))}", err=True)
     raise typer.Exit(code=2)
+
+
+def one_line(message: str, limit: int = MESSAGE_CHARS) -> str:
+    """A message as one line a user reads: line breaks joined, and a value given at any length (a path of
+    megabytes) cut in the middle to `limit` characters, its start and end kept."""
+    line = " ".join(message.split("\n"))
+    if len(line) <= limit:
+        return line
+    cut = len(line) - limit
+    head, tail = line[: limit * 2 // 3], line[len(line) - limit // 3 :]
+    return f"{head}...({cut} characters cut)...{tail}"
 
 
 def table(rows: list[tuple[str, Any]]) -> str:

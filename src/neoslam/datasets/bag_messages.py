@@ -16,6 +16,7 @@ from pydantic import ValidationError
 
 from neoslam.config import CameraConfig, describe_validation_error
 from neoslam.geometry import pose_from_quaternion
+from neoslam.io.image_header import oversized
 
 __all__ = [
     "IMAGE_TYPE",
@@ -118,6 +119,9 @@ def _grey_from_compressed(message: Any) -> np.ndarray:
     if "compresseddepth" in fmt.lower():
         raise MessageError(f"unsupported image format {fmt!r} (a depth image, not a camera image)")
     data = _octets(message.data)
+    too_large = oversized(data[: 1 << 20].tobytes())
+    if too_large is not None:
+        raise MessageError(f"compressed image: {too_large}")
     grey = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE) if data.size else None
     if grey is None:
         raise MessageError(f"compressed image (format {fmt!r}, {data.size} bytes) cannot be decoded")

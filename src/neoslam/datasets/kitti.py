@@ -26,6 +26,7 @@ from pydantic import ValidationError
 from neoslam.config import CameraConfig, describe_validation_error
 from neoslam.errors import InputError
 from neoslam.inputs import MAX_IMAGE_BYTES, read_input_bytes
+from neoslam.io.image_header import oversized
 from neoslam.io.trajectory_files import read_kitti, read_times
 from neoslam.text import read_text
 from neoslam.types import Trajectory
@@ -124,6 +125,9 @@ def read_grey_image(path: Path) -> np.ndarray:
     data = read_input_bytes(path, "image not found", MAX_IMAGE_BYTES)
     if data.startswith(PNG_SIGNATURE) and PNG_END not in data:
         raise InputError(path, "truncated PNG (its closing IEND chunk is missing)")
+    too_large = oversized(data)
+    if too_large is not None:
+        raise InputError(path, too_large)
     with _native_stderr_silenced():
         image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_GRAYSCALE) if data else None
     if image is None:
