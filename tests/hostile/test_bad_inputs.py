@@ -530,3 +530,23 @@ def test_the_size_of_a_jpeg_is_read_from_its_frame_header():
     frame = data.index(b"\xff\xc0")
     data[frame + 5 : frame + 9] = (40000).to_bytes(2, "big") + (50000).to_bytes(2, "big")
     assert image_size(bytes(data)) == (50000, 40000) and "50000x40000" in oversized(bytes(data))
+
+
+def test_a_simulation_whose_patches_exceed_the_memory_budget_is_refused_before_it_starts(cli, tmp_path: Path):
+    """256-pixel patches and 100 false positives a frame, both in range: 10 GiB of patches on the block route,
+    refused from the configuration alone; NEOSLAM_MAX_MEMORY sets the budget, and a value that is no amount is one
+    line."""
+    env = {
+        "NEOSLAM_SIMULATOR__DETECTION__PATCH_SIZE": "256",
+        "NEOSLAM_SIMULATOR__DETECTION__FALSE_POSITIVES_PER_FRAME": "100",
+        "NEOSLAM_MAX_MEMORY": "2G",
+    }
+    result = cli.invoke("simulate", "--route", "block", "--out", tmp_path / "o", env=env)
+    cli.one_line_error(
+        result, "816 frames x 100 false positives a frame x 256x256 patches", "2.0 GiB", "NEOSLAM_MAX_MEMORY"
+    )
+    assert not (tmp_path / "o").exists()
+    result = cli.invoke(
+        "simulate", "--route", "block", "--out", tmp_path / "o", env={**env, "NEOSLAM_MAX_MEMORY": "lots"}
+    )
+    cli.one_line_error(result, "NEOSLAM_MAX_MEMORY: 'lots' is not an amount of memory")

@@ -8,6 +8,8 @@ with an input file is an `InputError` naming the file and, where there is one, t
 from __future__ import annotations
 
 import re
+import warnings
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -56,39 +58,91 @@ _TUM_COLUMNS = 8
 _KITTI_COLUMNS = 12
 
 
-def _data_lines(path: Path) -> list[tuple[int, list[str]]]:
-    """(line number, tokens) of every line that is neither blank nor a `#` comment."""
-    text = read_text(path)
-    rows = []
+def _data_lines(text: str, path: Path) -> Iterator[tuple[int, list[str]]]:
+    """(line number, tokens) of every line that is neither blank nor a `#` comment, one at a time (a file of ten
+    million lines is not held as ten million lists)."""
+    found = False
     for number, line in enumerate(text.splitlines(), start=1):
         stripped = line.strip()
         if stripped and not stripped.startswith("#"):
-            rows.append((number, _SEPARATOR.split(stripped)))
-    if not rows:
+            found = True
+            yield number, _SEPARATOR.split(stripped)
+    if not found:
         raise InputError(path, "no data lines (the file is empty or only has comments)")
-    return rows
 
 
 def data_line_numbers(path: str | Path) -> np.ndarray:
     """The 1-based line number of each pose (data line) of a trajectory or times file, to name a pose's line."""
-    return np.array([number for number, _ in _data_lines(Path(path))])
+    path = Path(path)
+    text = read_text(path)
+    rows = _plain_rows(text)
+    if rows is not None:
+        return np.arange(1, rows + 1)
+    return np.fromiter((number for number, _ in _data_lines(text, path)), dtype=np.int64)
+
+
+def _plain_rows(text: str) -> int | None:
+    """The number of lines of a file of numbers only, one row a line, no blank or comment line (then line k is row
+    k); None for any other file."""
+    if not text or "#" in text or "," in text or "\n\n" in text or text.startswith("\n"):
+        return None
+    rows = text.count("\n") + (0 if text.endswith("\n") else 1)
+    return rows
+
+
+def _read_plain(text: str, columns: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """A plain file of numbers (`_plain_rows`) parsed at once in C: (n, columns) finite floats and line numbers; None
+    when the file is not plain, a row has another count of values, or a value is not a finite number (the line by
+    line reader then names the line)."""
+    rows = _plain_rows(text)
+    if rows is None:
+        return None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # text that stops being numbers: a short array, or numpy's ValueError
+        try:
+            values = np.fromstring(text, sep=" ")
+        except ValueError:
+            return None
+    if values.size != rows * columns or not np.isfinite(values).all():
+        return None
+    if not np.all(_tokens_per_line(text) == columns):  # whole rows, not the right count of values reflowed
+        return None
+    return values.reshape(rows, columns), np.arange(1, rows + 1)
+
+
+def _tokens_per_line(text: str) -> np.ndarray:
+    """The number of whitespace-separated tokens on each line, counted over the bytes at once."""
+    data = np.frombuffer(text.encode("utf-8", "surrogateescape"), dtype=np.uint8)
+    blank = (data == 32) | (data == 9) | (data == 13) | (data == 10)
+    starts = np.flatnonzero(~blank & np.concatenate(([True], blank[:-1])))
+    ends = np.flatnonzero(data == 10)
+    if len(ends) == 0 or ends[-1] != len(data) - 1:
+        ends = np.append(ends, len(data))
+    return np.diff(np.searchsorted(starts, ends), prepend=0)
 
 
 def _read_numbers(path: Path, columns: int) -> tuple[np.ndarray, np.ndarray]:
     """(n, columns) finite floats and the (n,) line number each row came from."""
-    rows = _data_lines(path)
-    values = np.empty((len(rows), columns))
-    for i, (number, tokens) in enumerate(rows):
+    text = read_text(path)
+    plain = _read_plain(text, columns)
+    if plain is not None:
+        return plain
+    values: list[np.ndarray] = []
+    numbers: list[int] = []
+    for number, tokens in _data_lines(text, path):
         if len(tokens) != columns:
             raise InputError(path, f"{len(tokens)} columns found, {columns} expected", number)
+        row = np.empty(columns)
         for j, token in enumerate(tokens):
             try:
-                values[i, j] = float(token)
+                row[j] = float(token)
             except ValueError:
                 raise InputError(path, f"not a number: {token!r}", number) from None
-            if not np.isfinite(values[i, j]):
+            if not np.isfinite(row[j]):
                 raise InputError(path, f"value is not finite: {token!r}", number)
-    return values, np.array([number for number, _ in rows])
+        values.append(row)
+        numbers.append(number)
+    return np.array(values), np.array(numbers)
 
 
 def _check_magnitude(path: Path, values: np.ndarray, lines: np.ndarray, limit: float, what: str) -> None:
@@ -181,7 +235,7 @@ def read_trajectory(
     if fmt not in ("tum", "kitti", "auto"):
         raise InputError(path, f"unknown trajectory format {fmt!r} (expected 'tum', 'kitti' or 'auto')")
     if fmt == "auto":
-        number, tokens = _data_lines(path)[0]
+        number, tokens = next(_data_lines(read_text(path), path))
         formats = {_TUM_COLUMNS: "tum", _KITTI_COLUMNS: "kitti"}
         if len(tokens) not in formats:
             problem = f"cannot tell the format: {len(tokens)} columns found (8 for TUM, 12 for KITTI)"
