@@ -3,8 +3,8 @@ value, rather than failing nine calls deep or being taken silently.
 
 `check_observation` and `check_frame` run when an ObjectObservation or a Frame is made (neoslam.types); a
 `FrameOrder` checks each frame `NeoSLAM.step` is given against the one before: indices increasing, time not going
-back, and the motion limits the CLI applies to files (`motion_limits`: speed, rotation rate, time step, and the
-odometry's step between frames).
+back, and the motion limits the CLI applies to files (`motion_limits`: speed, rotation rate and the odometry's step
+between frames; not the time step, which files have checked and a live camera may pause for as long as it likes).
 """
 
 from __future__ import annotations
@@ -103,8 +103,8 @@ def check_frame(frame: Any, observation_type: type) -> None:
 
 class FrameOrder:
     """Each frame given to `NeoSLAM.step`: its objects in front of the camera, with patches; against the frame
-    before, a larger index, a timestamp not earlier, a time step, speeds and an odometry step inside
-    `motion_limits` (as the CLI checks files)."""
+    before, a larger index, a timestamp not earlier, speeds and an odometry step inside `motion_limits` (as the CLI
+    checks files)."""
 
     def __init__(self, limits: MotionLimitsConfig, frame_type: type) -> None:
         self.limits = limits
@@ -146,13 +146,6 @@ class FrameOrder:
             step = frame.timestamp - stamp
             if step < 0.0:
                 _fail("Frame", "timestamp", f"{frame.timestamp:.9g} s is before the previous frame's {stamp:.9g} s")
-            if step > limits.max_time_step:
-                _fail(
-                    "Frame",
-                    "timestamp",
-                    f"time step of {step:.6g} s from the previous frame exceeds motion_limits.max_time_step "
-                    f"({limits.max_time_step:g} s)",
-                )
             moved = float(np.linalg.norm(np.asarray(frame.odometry_pose)[:3, 3] - position))
             if step > 0.0 and moved / step > limits.max_speed:
                 _fail(

@@ -99,10 +99,6 @@ SEQUENCES = {
         [_frame(0, linear_velocity=np.array([1e6, 0.0, 0.0]))],
         "Frame.linear_velocity: speed 1e+06 m/s exceeds motion_limits.max_speed",
     ),
-    "a time gap beyond the limits": (
-        [_frame(0), dataclasses.replace(_frame(1), timestamp=1e7)],
-        "exceeds motion_limits.max_time_step",
-    ),
     "an object behind the camera": (
         [_frame(0, observations=(_observation(center_camera=np.array([0.0, 0.0, -4.0])),))],
         "Frame.observations[0].center_camera: depth (z, optical frame) -4 m is not in front of the camera",

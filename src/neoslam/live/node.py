@@ -308,7 +308,7 @@ class LiveNode:
             _TopicMotion() if self.live.odometry_topic else StereoMotion(StereoOdometry(camera, perception.odometry))
         )
         triangulator = ObjectTriangulator(camera, perception.stereo)
-        self._front_end = StereoFrontEnd(triangulator, self.detector, motion)
+        self._front_end = StereoFrontEnd(triangulator, self.detector, motion, self.config.motion_limits)
         # The network's first inference at an image size is several times slower than the next: pay it now, on a
         # blank image, rather than on a frame (the detector holds no state between frames).
         self.detector.detect(WARM_UP_FRAME, np.zeros((camera.height, camera.width), dtype=np.uint8))

@@ -146,12 +146,23 @@ class PerceptionTimes:
 class StereoFrontEnd:
     """Detection, ORB stereo triangulation and odometry for one stereo frame at a time."""
 
-    def __init__(self, triangulator: ObjectTriangulator, detector: ObjectDetector, motion: MotionSource) -> None:
+    def __init__(
+        self,
+        triangulator: ObjectTriangulator,
+        detector: ObjectDetector,
+        motion: MotionSource,
+        limits: MotionLimitsConfig | None = None,
+    ) -> None:
+        """`limits`: a step of the odometry beyond them (a visual odometry that failed) is replaced by the previous
+        frame's motion (constant velocity) and counted in `implausible_steps`; None: taken as it is."""
         self.triangulator = triangulator
         self.detector = detector
         self.motion = motion
+        self.limits = limits
         self.times = PerceptionTimes()
+        self.implausible_steps = 0
         self._previous: tuple[float, np.ndarray] | None = None
+        self._step = np.eye(4)  # the previous frame's motion, T_previous_current
 
     def _timed(self, stage: str, work, *args):
         start = time.perf_counter()
@@ -183,8 +194,22 @@ class StereoFrontEnd:
         if self._previous is not None:
             stamps = np.array([self._previous[0], pair.timestamp])
             linear, angular = (v[1] for v in body_velocities(np.stack([self._previous[1], pose]), stamps))
+            if not self._plausible(linear, angular, stamps[1] - stamps[0]):
+                self.implausible_steps += 1
+                pose = self._previous[1] @ self._step
+                linear, angular = (v[1] for v in body_velocities(np.stack([self._previous[1], pose]), stamps))
+            self._step = np.linalg.inv(self._previous[1]) @ pose
         self._previous = (pair.timestamp, pose)
         return Frame(pair.index, pair.timestamp, pose, linear, angular, placed.observations)
+
+    def _plausible(self, linear: np.ndarray, angular: np.ndarray, dt: float) -> bool:
+        limits = self.limits
+        if limits is None:
+            return True
+        speed, turn = float(np.linalg.norm(linear)), float(np.linalg.norm(angular))
+        return bool(
+            np.isfinite(speed) and np.isfinite(turn) and speed <= limits.max_speed and turn <= limits.max_turn_rate
+        )
 
 
 @dataclass
@@ -272,4 +297,4 @@ def open_front_end(
     else:
         motion = StereoMotion(StereoOdometry(sequence.camera, config.odometry))
     triangulator = ObjectTriangulator(sequence.camera, config.stereo)
-    return ImageDataset(sequence, StereoFrontEnd(triangulator, detector, motion), config.pipeline_depth)
+    return ImageDataset(sequence, StereoFrontEnd(triangulator, detector, motion, limits), config.pipeline_depth)
