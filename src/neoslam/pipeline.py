@@ -105,9 +105,8 @@ class NeoSLAM:
         self.detected_closures: list[LoopClosure] = []  # accepted by the loop-closure detector
         self.loop_closures: list[LoopClosure] = []  # and by the experience map's grid-cell check
         self._previous_odometry: np.ndarray | None = None
-        self._frame_order = FrameOrder(
-            config.motion_limits, Frame
-        )  # what the API is given, checked as the CLI's files are
+        # What the API is given, checked as the CLI's files are.
+        self._frame_order = FrameOrder(config.motion_limits, Frame)
         self._grid_position = np.zeros(3)  # decoded grid-cell position unwrapped over the torus, metres
         self._grid_centre = self.grid_cells.centre
         self._object_vector_batch: list[tuple[np.ndarray, np.ndarray]] = []

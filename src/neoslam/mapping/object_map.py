@@ -178,11 +178,10 @@ class ObjectMap:
         self, label: str, position: np.ndarray, ray: np.ndarray, sigma: float, anchor: int, parts: np.ndarray | None
     ) -> int:
         """The nearest live object of the label and of the anchor's map part inside the observation's gate (then
-        updated), or a new one. In the
-        ground plane the gate is the association radius across the viewing ray and, along it, `gate_sigmas` depth
-        stds if that is more (a far stereo centre is off mostly along the ray); in height, `height_tolerance` if
-        that is more than the radius (objects stand on the road, and a pitch or height error of the pose moves a
-        far view up or down). Nearest in distance scaled by the gate."""
+        updated), or a new one. In the ground plane the gate is the association radius across the viewing ray and,
+        along it, `gate_sigmas` depth stds if that is more (a far stereo centre is off mostly along the ray); in
+        height, `height_tolerance` if that is more than the radius (objects stand on the road, and a pitch or
+        height error of the pose moves a far view up or down). Nearest in distance scaled by the gate."""
         radius = self.config.association_radius
         along_gate = max(radius, self.config.gate_sigmas * sigma)
         height_gate = max(radius, self.config.height_tolerance)
