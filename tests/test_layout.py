@@ -18,10 +18,10 @@ PACKAGE = Path(__file__).resolve().parents[1] / "src" / "neoslam"
 MAX_MODULE_LINES = 500
 
 LAYERS: list[set[str]] = [
-    {"types", "geometry", "errors", "text", "inputs", "stopping", "boxes"},
+    {"types", "record_checks", "geometry", "errors", "text", "inputs", "stopping", "boxes", "memory"},
     {"config"},
     {"cells", "loop", "mapping"},
-    {"relocalisation", "pipeline", "navigation"},
+    {"relocalisation", "step_inputs", "pipeline", "navigation"},
     {"perception", "sim", "datasets", "store", "io", "evaluation", "viz", "report", "live"},
     {"commands"},
     {"sweep"},

@@ -29,8 +29,8 @@ from neoslam.loop.keyframes import KeyframeBuilder
 from neoslam.mapping.experience_map import CellState, ExperienceMap, Revisit
 from neoslam.mapping.moving_objects import MovingObjectDetector
 from neoslam.mapping.object_map import MapObject, ObjectMap
-from neoslam.record_checks import FrameOrder
 from neoslam.relocalisation import StoredMapRelocalisation
+from neoslam.step_inputs import FrameOrder
 from neoslam.types import Frame, Keyframe, LoopClosure, MapState, SessionRecord, StoredClosure, Trajectory
 
 __all__ = ["NeoSLAM", "RunResult", "StepObserver", "run", "object_vectors"]
