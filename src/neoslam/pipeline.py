@@ -357,10 +357,11 @@ class NeoSLAM:
         return (ids, *self.loop_detector.scores(keyframe))
 
     def result(self, frame_times_s: np.ndarray) -> RunResult:
-        """The run so far; `frame_times_s`, the wall time of each step, one per frame processed."""
-        if np.shape(frame_times_s) != (self._recorded,):
+        """The run so far; `frame_times_s`, the wall time of each step, one per frame processed (empty: not
+        timed)."""
+        if np.shape(frame_times_s) not in ((self._recorded,), (0,)):
             raise ValueError(
-                f"frame_times_s: expected one time per frame processed ({self._recorded}), got shape "
+                f"frame_times_s: expected one time per frame processed ({self._recorded}) or none, got shape "
                 f"{np.shape(frame_times_s)}"
             )
         self.experience_map.finish()  # links still waiting for the pose graph

@@ -138,8 +138,8 @@ class NavigationConfig(Section):
         le=100,
         description="guidance to an object: only an observation whose depth std is at most this is a sighting, m "
         "(the object map's: object_map.depth_sigma_at_1m times depth squared, or the front end's own when larger; "
-        "1.5 m is about 32 m away): a far view of another car beside a goal that left lands on the goal, and an "
-        "object far off the street is seen from no nearer than 20 to 30 m",
+        "1.5 m is about 32 m away): a far view of another car beside a goal that left lands on the goal; but a car "
+        "seen only from farther is never sighted and reported missing (docs: Navigating with a map)",
     )
     sightings: int = Field(
         2,
