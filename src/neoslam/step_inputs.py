@@ -13,7 +13,21 @@ import numpy as np
 from neoslam.config import MotionLimitsConfig
 from neoslam.record_checks import refuse
 
-__all__ = ["FrameOrder"]
+__all__ = ["FrameOrder", "velocity_problem"]
+
+
+def velocity_problem(linear: Any, angular: Any, limits: MotionLimitsConfig) -> tuple[str, str] | None:
+    """The velocity beyond `motion_limits` (its field and what is wrong), or None: the speed |v| over max_speed or the
+    rotation rate |w| over max_turn_rate, a value that is not finite included."""
+    speed, turn = float(np.linalg.norm(linear)), float(np.linalg.norm(angular))
+    if not speed <= limits.max_speed:
+        return "linear_velocity", f"speed {speed:.6g} m/s exceeds motion_limits.max_speed ({limits.max_speed:g} m/s)"
+    if not turn <= limits.max_turn_rate:
+        return (
+            "angular_velocity",
+            f"rotation rate {turn:.6g} rad/s exceeds motion_limits.max_turn_rate ({limits.max_turn_rate:g} rad/s)",
+        )
+    return None
 
 
 class FrameOrder:
@@ -40,20 +54,9 @@ class FrameOrder:
             if observation.patch is None:
                 refuse("Frame", f"observations[{k}].patch", "None: keyframes match objects by their patches")
         limits = self.limits
-        speed = float(np.linalg.norm(frame.linear_velocity))
-        if speed > limits.max_speed:
-            refuse(
-                "Frame",
-                "linear_velocity",
-                f"speed {speed:.6g} m/s exceeds motion_limits.max_speed ({limits.max_speed:g} m/s)",
-            )
-        turn = float(np.linalg.norm(frame.angular_velocity))
-        if turn > limits.max_turn_rate:
-            refuse(
-                "Frame",
-                "angular_velocity",
-                f"rotation rate {turn:.6g} rad/s exceeds motion_limits.max_turn_rate ({limits.max_turn_rate:g} rad/s)",
-            )
+        problem = velocity_problem(frame.linear_velocity, frame.angular_velocity, limits)
+        if problem is not None:
+            refuse("Frame", *problem)
         if self._previous is not None:
             index, stamp, position = self._previous
             if frame.index <= index:

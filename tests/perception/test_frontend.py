@@ -191,3 +191,25 @@ def test_stage_times_total_only_the_frames_that_passed_every_stage() -> None:
     figures = times.summary()
     assert figures["detection_ms_median"] == 50.0
     assert figures["total_ms_median"] == 70.0
+
+
+def test_an_odometry_step_beyond_the_motion_limits_is_replaced_by_the_previous_motion() -> None:
+    """A visual odometry that fails jumps 50 m in a frame (500 m/s): the front end holds the previous frame's motion
+    instead (1 m a frame along x) and counts the step, and goes on by the source's steps from there."""
+    from neoslam.config import MotionLimitsConfig
+    from neoslam.perception.frontend import DetectedPair, PlacedPair, StereoFrontEnd, StereoPair
+
+    xs = iter([0.0, 1.0, 2.0, 52.0, 53.0])
+
+    class Jumping:
+        def pose(self, frame_index, left, right, boxes):
+            pose = np.eye(4)
+            pose[0, 3] = next(xs)
+            return pose
+
+    front_end = StereoFrontEnd(None, None, Jumping(), MotionLimitsConfig())
+    image = np.zeros((4, 4), np.uint8)
+    frames = [front_end.moved(PlacedPair(DetectedPair(StereoPair(k, 0.1 * k, image, image), []), ())) for k in range(5)]
+    positions = [frame.odometry_pose[0, 3] for frame in frames]
+    assert positions == pytest.approx([0.0, 1.0, 2.0, 3.0, 4.0]) and front_end.implausible_steps == 1
+    assert frames[3].linear_velocity[0] == pytest.approx(10.0)  # and the source's next step (1 m) is taken again

@@ -27,6 +27,7 @@ from neoslam.perception.detector import make_detector
 from neoslam.perception.odometry import StereoOdometry
 from neoslam.perception.pipelined import staged
 from neoslam.perception.stereo import ObjectTriangulator
+from neoslam.step_inputs import velocity_problem
 from neoslam.types import Frame, ObjectObservation, Trajectory
 
 __all__ = [
@@ -161,8 +162,9 @@ class StereoFrontEnd:
         self.limits = limits
         self.times = PerceptionTimes()
         self.implausible_steps = 0
-        self._previous: tuple[float, np.ndarray] | None = None
+        self._previous: tuple[float, np.ndarray, np.ndarray] | None = None  # time, the source's pose, the pose given
         self._step = np.eye(4)  # the previous frame's motion, T_previous_current
+        self._correction: np.ndarray | None = None  # from the source's poses to those given, once a step was replaced
 
     def _timed(self, stage: str, work, *args):
         start = time.perf_counter()
@@ -189,27 +191,21 @@ class StereoFrontEnd:
         odometry carries state from frame to frame, so the frames come here in order)."""
         pair, detections = placed.detected.pair, placed.detected.detections
         boxes = np.array([d.box for d in detections], dtype=np.float64).reshape(-1, 4)
-        pose = self._timed("odometry", self.motion.pose, pair.index, pair.left, pair.right, boxes)
+        raw = self._timed("odometry", self.motion.pose, pair.index, pair.left, pair.right, boxes)
+        pose = raw if self._correction is None else self._correction @ raw
         linear, angular = np.zeros(3), np.zeros(3)
         if self._previous is not None:
-            stamps = np.array([self._previous[0], pair.timestamp])
-            linear, angular = (v[1] for v in body_velocities(np.stack([self._previous[1], pose]), stamps))
-            if not self._plausible(linear, angular, stamps[1] - stamps[0]):
-                self.implausible_steps += 1
-                pose = self._previous[1] @ self._step
-                linear, angular = (v[1] for v in body_velocities(np.stack([self._previous[1], pose]), stamps))
-            self._step = np.linalg.inv(self._previous[1]) @ pose
-        self._previous = (pair.timestamp, pose)
+            stamp, raw_before, before = self._previous
+            stamps = np.array([stamp, pair.timestamp])
+            linear, angular = (v[1] for v in body_velocities(np.stack([raw_before, raw]), stamps))
+            if self.limits is not None and velocity_problem(linear, angular, self.limits) is not None:
+                self.implausible_steps += 1  # the source's own step is beyond the limits: the previous one instead
+                pose = before @ self._step
+                self._correction = pose @ invert_pose(raw)  # the source's later steps go on from there
+                linear, angular = (v[1] for v in body_velocities(np.stack([before, pose]), stamps))
+            self._step = invert_pose(before) @ pose
+        self._previous = (pair.timestamp, raw, pose)
         return Frame(pair.index, pair.timestamp, pose, linear, angular, placed.observations)
-
-    def _plausible(self, linear: np.ndarray, angular: np.ndarray, dt: float) -> bool:
-        limits = self.limits
-        if limits is None:
-            return True
-        speed, turn = float(np.linalg.norm(linear)), float(np.linalg.norm(angular))
-        return bool(
-            np.isfinite(speed) and np.isfinite(turn) and speed <= limits.max_speed and turn <= limits.max_turn_rate
-        )
 
 
 @dataclass

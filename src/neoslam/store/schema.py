@@ -31,7 +31,10 @@ __all__ = [
     "FORMAT_VERSION",
     "APPLICATION_ID",
     "TABLES",
+    "ColumnInfo",
     "columns",
+    "format_schema",
+    "table_columns",
     "F8",
     "F4",
     "I4",
@@ -122,17 +125,35 @@ TABLES: dict[str, str] = {
 }
 
 
+ColumnInfo = tuple[object, ...]  # (name, declared type, NOT NULL, primary-key position) of one column
+
+
+@cache
+def format_schema() -> dict[tuple[str, str], tuple[str | None, tuple[ColumnInfo, ...]]]:
+    """(type, name) -> (sql, columns) of every schema object of a map as the format makes it (its tables and the
+    indexes SQLite makes for their keys), read from a database made in memory with TABLES."""
+    reference = sqlite3.connect(":memory:")
+    try:
+        for statement in TABLES.values():
+            reference.execute(statement)
+        rows = reference.execute("SELECT type, name, sql FROM sqlite_master").fetchall()
+        return {
+            (kind, name): (sql, table_columns(reference, name) if kind == "table" else ()) for kind, name, sql in rows
+        }
+    finally:
+        reference.close()
+
+
+def table_columns(connection: sqlite3.Connection, table: str) -> tuple[ColumnInfo, ...]:
+    """The columns of a table of a database, in order (see ColumnInfo)."""
+    rows = connection.execute('SELECT name, type, "notnull", pk FROM pragma_table_xinfo(?)', (table,)).fetchall()
+    return tuple(tuple(row) for row in rows)
+
+
 @cache
 def columns(table: str) -> str:
     """A table's columns by name, in the format's order, for a SELECT (a map's rows are read by column name)."""
-    reference = sqlite3.connect(":memory:")
-    try:
-        reference.execute(TABLES[table])
-        return ", ".join(
-            f'"{name}"' for (name,) in reference.execute("SELECT name FROM pragma_table_info(?)", (table,))
-        )
-    finally:
-        reference.close()
+    return ", ".join(f'"{column[0]}"' for column in format_schema()[("table", table)][1])
 
 
 def encode(array: Any, dtype: np.dtype, shape: tuple[int, ...] | None = None, what: str = "array") -> bytes:

@@ -16,14 +16,22 @@ import os
 import sqlite3
 import stat
 from contextlib import suppress
-from functools import lru_cache
 from pathlib import Path
 
 from neoslam import __version__
 from neoslam.config import MAP_SECTIONS, NeoSLAMConfig
 from neoslam.errors import InputError
 from neoslam.store.reading import first_line
-from neoslam.store.schema import APPLICATION_ID, FORMAT_TAG, FORMAT_VERSION, TABLES, config_difference
+from neoslam.store.schema import (
+    APPLICATION_ID,
+    FORMAT_TAG,
+    FORMAT_VERSION,
+    TABLES,
+    ColumnInfo,
+    config_difference,
+    format_schema,
+    table_columns,
+)
 
 __all__ = ["MAP_SECTIONS", "check_schema", "interrupted", "locked", "read_header", "validate"]
 
@@ -171,7 +179,7 @@ def validate(connection: sqlite3.Connection, path: Path, config: NeoSLAMConfig) 
 def check_schema(connection: sqlite3.Connection, path: Path) -> None:
     """Refuse a schema that is not exactly the format's: an object it does not define (trigger, view, index, table),
     or a table whose columns (name, type, NOT NULL, primary key, order) or definition differ."""
-    expected = _format_schema()
+    expected = format_schema()
     found = connection.execute("SELECT type, name, tbl_name, sql FROM sqlite_master ORDER BY rowid").fetchall()
     for kind, name, table, sql in found:
         if (kind, name) not in expected:
@@ -183,7 +191,7 @@ def check_schema(connection: sqlite3.Connection, path: Path) -> None:
                 "format's tables: one given with more could run its own SQL when it is written to)",
             )
         if kind == "table":
-            columns, wanted = _columns(connection, name), expected[(kind, name)][1]
+            columns, wanted = table_columns(connection, name), expected[(kind, name)][1]
             if [column[0] for column in columns] != [column[0] for column in wanted]:
                 raise InputError(
                     path, f"table {name}: columns {_listed(columns)} differ from the format's {_listed(wanted)}"
@@ -200,33 +208,14 @@ def check_schema(connection: sqlite3.Connection, path: Path) -> None:
             raise InputError(path, f"table {table}: {what}defined otherwise than the format's (its constraints)")
 
 
-@lru_cache(maxsize=1)
-def _format_schema() -> dict[tuple[str, str], tuple[str | None, tuple[tuple[object, ...], ...]]]:
-    """(type, name) -> (sql, columns) of every schema object of a map as the format makes it."""
-    reference = sqlite3.connect(":memory:")
-    try:
-        for statement in TABLES.values():
-            reference.execute(statement)
-        rows = reference.execute("SELECT type, name, sql FROM sqlite_master").fetchall()
-        return {(kind, name): (sql, _columns(reference, name) if kind == "table" else ()) for kind, name, sql in rows}
-    finally:
-        reference.close()
-
-
-def _columns(connection: sqlite3.Connection, table: str) -> tuple[tuple[object, ...], ...]:
-    """(name, declared type, NOT NULL, primary-key position) of each column of a table, in order."""
-    rows = connection.execute('SELECT name, type, "notnull", pk FROM pragma_table_xinfo(?)', (table,)).fetchall()
-    return tuple(tuple(row) for row in rows)
-
-
-def _declared(column: tuple[object, ...]) -> str:
+def _declared(column: ColumnInfo) -> str:
     _, kind, not_null, key = column
     return " ".join(
         str(part) for part in (kind or "untyped", "NOT NULL" if not_null else "", "PRIMARY KEY" if key else "") if part
     )
 
 
-def _listed(columns: tuple[tuple[object, ...], ...]) -> str:
+def _listed(columns: tuple[ColumnInfo, ...]) -> str:
     names = ", ".join(_clipped(str(column[0])) for column in columns[:20])
     more = f", and {len(columns) - 20} more" if len(columns) > 20 else ""
     return f"({names}{more})"
