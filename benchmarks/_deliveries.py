@@ -6,7 +6,9 @@ and a goal of the goal language. The mix (GOAL_MIX): an object by id that a worl
 (`nearest car`, the class drawn as often as the map holds it), an experience, a point on the streets (in the map's frame
 as the map draws that spot: placed from its nearest experience, `MappedDrive.drawn_on_map`) and `start of session 1`
 (the map's start: `start` alone is where the delivery's own session started). A removed-goal delivery names an object by
-id whose world object is taken out of the world before the robot starts.
+id whose world object is taken out of the world before the robot starts, with any object of its class beside it that no
+map object stands for (within FUSED_M: the map made one object of the two, and the goal has not left while one of them
+stands there).
 
 `run_delivery` drives it: a new session `NeoSLAM(config, stored=map)` (nothing written to disk) with a
 `GoalGuidance`; each frame the robot (benchmarks._robot) moves on the street graph from the guidance of the last
@@ -26,7 +28,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from benchmarks._delivery_maps import MappedDrive
+from benchmarks._delivery_maps import MATCH_RADIUS_M, MappedDrive
 from benchmarks._robot import LOOKING, STOPPING, Robot, choose_next
 from neoslam.datasets.simulated import simulated_observations
 from neoslam.geometry import integrate_body_velocities
@@ -45,6 +47,8 @@ EXPLORE_BUDGET_M = 500.0  # beyond three times the shortest path, for relocalisi
 TURN_FRAMES = 100  # beyond that, frames for turns in place
 MIN_DELIVERY_M = 50.0  # a goal nearer than this by street to the start is drawn again
 START_TRIES = 20
+# An unmatched world object of its class this near a removed goal went into the goal's map object.
+FUSED_M = 2 * MATCH_RADIUS_M
 
 
 @dataclass(frozen=True)
@@ -145,9 +149,19 @@ def plan_deliveries(mapped: MappedDrive, count: int, removed: int, seed: int, ma
     return plans
 
 
-def _without(world: World, index: int) -> World:
-    """The world with one static object taken out."""
-    keep = np.arange(len(world)) != index
+def _removed(mapped: MappedDrive, world_object: int) -> np.ndarray:
+    """The world objects a removed-goal delivery takes out: the goal's and those of its class within FUSED_M of it
+    that no map object stands for."""
+    world = mapped.world
+    near = np.hypot(*(world.positions[:, :2] - world.positions[world_object, :2]).T) <= FUSED_M
+    same = world.labels == world.labels[world_object]
+    unmatched = ~np.isin(np.arange(len(world)), mapped.object_match)
+    return np.flatnonzero((near & same & unmatched) | (np.arange(len(world)) == world_object))
+
+
+def _without(world: World, indices: np.ndarray) -> World:
+    """The world with static objects taken out."""
+    keep = ~np.isin(np.arange(len(world)), indices)
     if world.traffic is not None:
         raise ValueError("a removed goal is taken out of a static world only")
     return replace(
@@ -182,7 +196,7 @@ def run_delivery(mapped: MappedDrive, plan: DeliveryPlan) -> Delivery:
     """Drive one delivery (see the module)."""
     config = mapped.config
     simulator = config.simulator
-    world = mapped.world if plan.removed < 0 else _without(mapped.world, plan.removed)
+    world = mapped.world if plan.removed < 0 else _without(mapped.world, _removed(mapped, plan.removed))
     detector = DetectionSimulator(world, simulator.camera, simulator.detection)
     classes = config.perception.detector.classes
     odometry_rng, detection_rng, explore_rng = _streams(plan.seed)

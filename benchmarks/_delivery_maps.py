@@ -80,12 +80,19 @@ class MappedDrive:
         return int(self.object_match[rows[0]]) if len(rows) else -1
 
 
+DELIVERY_TURN_RATE = 10.0  # rad/s, the delivery robot's frames' largest rotation rate with the odometry's noise
+
+
 def map_names() -> list[str]:
     return [*KITTI_MAPS, *sorted(ROUTES)]
 
 
 def _config(seed: int, noise: str, detector: str) -> NeoSLAMConfig:
-    return simulation_config(NeoSLAMConfig(), noise, seed, detector)
+    config = simulation_config(NeoSLAMConfig(), noise, seed, detector)
+    # The delivery robot takes a street's bend at a node in one frame (up to SNAP_TURN_RAD: 4.4 rad/s at 10 Hz),
+    # beyond the road vehicle's rotation rate the pipeline checks each frame against.
+    limits = config.motion_limits.model_copy(update={"max_turn_rate": DELIVERY_TURN_RATE})
+    return config.model_copy(update={"motion_limits": limits})
 
 
 def _recording(name: str, config: NeoSLAMConfig):

@@ -132,14 +132,14 @@ class NavigationConfig(Section):
         "a frame, in the map's record of it when the route is planned, or in the recall_frames before it "
         "relocalised) is looked at for look_time, then reported missing, not arrived (a parked car that left)",
     )
-    sighting_depth_sigma: float = Field(
-        1.5,
-        gt=0,
+    sighting_margin: float = Field(
+        1.0,
+        ge=0,
         le=100,
-        description="guidance to an object: only an observation whose depth std is at most this is a sighting, m "
-        "(the object map's: object_map.depth_sigma_at_1m times depth squared, or the front end's own when larger; "
-        "1.5 m is about 32 m away): a far view of another car beside a goal that left lands on the goal; but a car "
-        "seen only from farther is never sighted and reported missing (docs: Navigating with a map)",
+        description="guidance to an object: an observation is a sighting of the goal only when it lies nearer to the "
+        "goal than to any other object of its class in the map by this many stds of its depth (the object map's: "
+        "object_map.depth_sigma_at_1m times depth squared, or the front end's own when larger): a far view of a car "
+        "beside a goal that left, metres off along its ray, could be either and sights neither",
     )
     sightings: int = Field(
         2,

@@ -10,10 +10,11 @@ guidance). A goal that cannot be planned (unknown, stale, ambiguous, out of reac
 
 An object goal must be seen to be reached: a parked car may have left since the map was made, and the map cannot
 know it until the robot looks. Every frame's observations of the goal's class are placed in the map (the robot's
-pose there, each moved from the surface the camera sees to the object's middle as the map's objects are), those
-whose stereo depth is good enough (`navigation.sighting_depth_sigma`); one within
-`navigation.confirm_radius` of the goal object, and nearer to it than to any other object of its class in the map,
-is a sighting. `navigation.sightings` frames with one see the goal object (a single far observation of a neighbour
+pose there, each moved from the surface the camera sees to the object's middle as the map's objects are); one within
+`navigation.confirm_radius` of the goal object, and nearer to it than to any other object of its class in the map
+by `navigation.sighting_margin` of its depth's std (a far view, metres off along its ray, of a car beside a goal
+that left must not land on the goal; a car seen only from far, behind a row of others, must still be seen), is a
+sighting. `navigation.sightings` frames with one see the goal object (a single far observation of a neighbour
 can land on it: stereo depth is metres off at 50 m); so does the map's own record, when the route is planned, that
 this session observed the goal object (before it relocalised, say: the car it has just passed, which a route of a
 few metres reaches before the camera sees it again); so do the last `navigation.recall_frames` frames before the
@@ -99,18 +100,17 @@ class _Recalled:
     odometry_pose: np.ndarray  # (4, 4)
     labels: tuple[str, ...]
     centres: np.ndarray  # (k, 3) robot frame
+    sigmas: np.ndarray  # (k,) each centre's std along its viewing ray, m
 
     @classmethod
     def of(cls, frame: Frame, config: NeoSLAMConfig) -> _Recalled:
-        """The frame's observations near enough for their depth to place them (`sighting_depth_sigma`)."""
-        sigmas = depth_sigmas(frame.observations, config.object_map) if frame.observations else np.zeros(0)
-        near = tuple(
-            o for o, s in zip(frame.observations, sigmas, strict=True) if s <= config.navigation.sighting_depth_sigma
-        )
-        if not near:
-            return cls(frame.odometry_pose, (), np.zeros((0, 3)))
-        centres = camera_points_to_robot(object_centres(near, config.keyframes.footprints))
-        return cls(frame.odometry_pose, tuple(o.label for o in near), centres)
+        """The frame's observations, placed as the object map places them, with their depth's std."""
+        observations = frame.observations
+        if not observations:
+            return cls(frame.odometry_pose, (), np.zeros((0, 3)), np.zeros(0))
+        centres = camera_points_to_robot(object_centres(observations, config.keyframes.footprints))
+        sigmas = depth_sigmas(observations, config.object_map)
+        return cls(frame.odometry_pose, tuple(o.label for o in observations), centres, sigmas)
 
 
 @dataclass
@@ -266,7 +266,7 @@ class GoalGuidance:
         to_map = pose @ np.linalg.inv(frame.odometry_pose)  # T_map_odometry
         found = 0
         for seen in self._recalled:
-            found += self._sees(seen.labels, to_map @ seen.odometry_pose, seen.centres)
+            found += self._sees(seen, to_map @ seen.odometry_pose)
         self._recalled.clear()
         return found
 
@@ -274,23 +274,24 @@ class GoalGuidance:
         """Whether the frame (its robot at `pose` in the map) saw the goal object."""
         if not frame.observations or not self._is_object_goal():
             return False
-        seen = _Recalled.of(frame, self.config)
-        return self._sees(seen.labels, pose, seen.centres)
+        return self._sees(_Recalled.of(frame, self.config), pose)
 
-    def _sees(self, labels: tuple[str, ...], pose: np.ndarray, centres: np.ndarray) -> bool:
-        """Whether objects at `centres` (robot frame, each the middle of an observed object of its label), seen from
-        `pose` in the map, include the goal object: one of its class within confirm_radius of it and nearer to it
-        than to any other object of its class in the map (a neighbour's observation, off by its measurement and the
-        map's error, is the neighbour's)."""
+    def _sees(self, seen: _Recalled, pose: np.ndarray) -> bool:
+        """Whether the objects `seen` (robot frame, each the middle of an observed object), seen from `pose` in the
+        map, include the goal object: one of its class within confirm_radius of it and nearer to it than to any
+        other object of its class in the map by sighting_margin of its depth's std (a neighbour's observation, off
+        by its measurement and the map's error, is the neighbour's, and one that could be either is neither)."""
         route = self.route
         if route is None or route.goal.kind != "object" or route.goal.object is None:
             return False
-        mine = np.array([label == route.goal.object.label for label in labels], dtype=bool)
+        mine = np.array([label == route.goal.object.label for label in seen.labels], dtype=bool)
         if not mine.any():
             return False
-        in_map = centres[mine] @ pose[:3, :3].T + pose[:3, 3]
+        in_map = seen.centres[mine] @ pose[:3, :3].T + pose[:3, 3]
         gaps = np.hypot(*(in_map[:, :2] - route.goal.target[:2]).T)
         theirs = np.full(len(gaps), np.inf)
         if len(self._rivals):
             theirs = np.linalg.norm(in_map[:, None, :2] - self._rivals[None], axis=2).min(axis=1)
-        return bool(((gaps <= self.config.navigation.confirm_radius) & (gaps < theirs)).any())
+        navigation = self.config.navigation
+        clear = gaps + navigation.sighting_margin * seen.sigmas[mine] < theirs
+        return bool(((gaps <= navigation.confirm_radius) & clear).any())
