@@ -8,7 +8,7 @@ as the map draws that spot: placed from its nearest experience, `MappedDrive.dra
 (the map's start: `start` alone is where the delivery's own session started). A removed-goal delivery names an object by
 id whose world object is taken out of the world before the robot starts, with any object of its class beside it that no
 map object stands for (within FUSED_M: the map made one object of the two, and the goal has not left while one of them
-stands there).
+stands there; the nearest mapped one's, when several are).
 
 `run_delivery` drives it: a new session `NeoSLAM(config, stored=map)` (nothing written to disk) with a
 `GoalGuidance`; each frame the robot (benchmarks._robot) moves on the street graph from the guidance of the last
@@ -150,13 +150,18 @@ def plan_deliveries(mapped: MappedDrive, count: int, removed: int, seed: int, ma
 
 
 def _removed(mapped: MappedDrive, world_object: int) -> np.ndarray:
-    """The world objects a removed-goal delivery takes out: the goal's and those of its class within FUSED_M of it
-    that no map object stands for."""
+    """The world objects a removed-goal delivery takes out: the goal's, and those of its class within FUSED_M of it
+    that no map object stands for and whose nearest mapped object of their class is the goal's."""
     world = mapped.world
-    near = np.hypot(*(world.positions[:, :2] - world.positions[world_object, :2]).T) <= FUSED_M
-    same = world.labels == world.labels[world_object]
-    unmatched = ~np.isin(np.arange(len(world)), mapped.object_match)
-    return np.flatnonzero((near & same & unmatched) | (np.arange(len(world)) == world_object))
+    labels, planar = np.asarray(world.labels), world.positions[:, :2]
+    everything = np.arange(len(labels))
+    matched = np.flatnonzero(np.isin(everything, mapped.object_match) & (labels == labels[world_object]))
+    taken = [world_object]
+    for other in np.flatnonzero((labels == labels[world_object]) & ~np.isin(everything, matched)):
+        gaps = np.hypot(*(planar[matched] - planar[other]).T)
+        if gaps.min() <= FUSED_M and matched[np.argmin(gaps)] == world_object:
+            taken.append(int(other))
+    return np.array(sorted(taken))
 
 
 def _without(world: World, indices: np.ndarray) -> World:

@@ -10,6 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 from benchmarks import navigation
+from benchmarks._deliveries import FUSED_M, _removed
 from benchmarks._judging import _beside
 from benchmarks._robot import MAX_YAW_RATE, Robot, choose_next, explore, follow, street_ahead
 from benchmarks._street_graph import SPACING_M, StreetGraph, street_graph
@@ -138,6 +139,16 @@ def test_an_object_between_two_streets_is_beside_both():
     assert sorted(map(tuple, between[:, :2].round())) == [(80.0, 0.0), (100.0, 20.0)]
     kerb = _beside(mapped, np.array([40.0, 5.0, 0.0]))
     assert kerb[:, :2].round().tolist() == [[40.0, 0.0]]
+
+
+def test_a_removed_goal_takes_out_the_unmapped_car_of_its_class_the_map_fused_with_it():
+    """World objects: the goal car (0), an unmapped car 3.4 m from it (1: the map made one object of the two), a
+    mapped car as near (2), an unmapped person beside it (3) and an unmapped car beyond FUSED_M (4)."""
+    positions = np.array([[0, 0, 0], [3.4, 0, 0], [0, 3.4, 0], [1, 1, 0], [FUSED_M + 1, 0, 0]], dtype=float)
+    world = SimpleNamespace(positions=positions, labels=np.array(["car", "car", "car", "person", "car"]))
+    mapped = SimpleNamespace(world=world, object_match=np.array([0, 2, -1]))
+    assert _removed(mapped, 0).tolist() == [0, 1]
+    assert _removed(mapped, 2).tolist() == [2]  # the unmapped car is the goal's, nearer it and fused into it
 
 
 @pytest.mark.slow  # maps the block route and drives two deliveries and a removed goal: a minute or two
