@@ -22,6 +22,7 @@ __all__ = [
     "MAX_TEXT_BYTES",
     "check_input_file",
     "check_input_folder_files",
+    "count_lines",
     "read_input_bytes",
 ]
 
@@ -29,6 +30,7 @@ MAX_TEXT_BYTES = 256 * 2**20  # a text table, trajectory or detections file (a d
 MAX_CONFIG_BYTES = 16 * 2**20  # a YAML configuration, sweep spec or dataset description
 MAX_IMAGE_BYTES = 64 * 2**20  # one encoded image (a KITTI PNG: ~0.3 MB; an uncompressed 4K image: 25 MB)
 MAX_MODEL_BYTES = 2 * 2**30  # an ONNX detector (protobuf's own limit)
+_COUNT_BLOCK = 2**20  # bytes read at once when lines are counted
 
 _KINDS = {
     stat.S_IFIFO: "a FIFO (named pipe)",
@@ -81,10 +83,9 @@ def check_input_folder_files(folder: Path) -> None:
             raise _refusal(entry, mode)
 
 
-def read_input_bytes(path: Path, missing: str = "file not found", limit: int = MAX_TEXT_BYTES) -> bytes:
-    """A regular file's bytes, at most `limit` of them. The file is opened without blocking and checked again
-    once open, so that a path swapped for a FIFO after the check cannot hang the read."""
-    check_input_file(path, missing, limit)
+def _open_regular(path: Path, missing: str):
+    """The file opened for reading without blocking, checked again once open (a path swapped for a FIFO after the
+    check cannot hang a read)."""
     try:
         descriptor = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     except FileNotFoundError:
@@ -93,14 +94,44 @@ def read_input_bytes(path: Path, missing: str = "file not found", limit: int = M
         if error.errno == errno.EISDIR:
             raise InputError(path, "is a folder, not a file") from None
         raise InputError(path, f"cannot be read ({error.strerror})") from None
-    with os.fdopen(descriptor, "rb") as handle:
-        status = os.fstat(handle.fileno())
-        if not stat.S_ISREG(status.st_mode):
-            raise _refusal(path, status.st_mode)
+    handle = os.fdopen(descriptor, "rb")
+    status = os.fstat(handle.fileno())
+    if not stat.S_ISREG(status.st_mode):
+        handle.close()
+        raise _refusal(path, status.st_mode)
+    return handle, status.st_size
+
+
+def read_input_bytes(path: Path, missing: str = "file not found", limit: int = MAX_TEXT_BYTES) -> bytes:
+    """A regular file's bytes, at most `limit` of them. The file is opened without blocking and checked again
+    once open, so that a path swapped for a FIFO after the check cannot hang the read."""
+    check_input_file(path, missing, limit)
+    handle, size = _open_regular(path, missing)
+    with handle:
         try:
-            data = handle.read(limit + 1)
+            # Sized by the file, not the limit: a read of limit + 1 bytes allocates that much at once.
+            data = handle.read(min(limit, size) + 1)
+            if len(data) > size:  # the file grew since: read on, up to the limit
+                data += handle.read(limit + 1 - len(data))
         except OSError as error:
             raise InputError(path, f"cannot be read ({error.strerror})") from None
     if len(data) > limit:
         raise _too_large(path, len(data), limit)
     return data
+
+
+def count_lines(path: Path, missing: str = "file not found", limit: int = MAX_TEXT_BYTES) -> int:
+    """The number of lines of a regular text file of at most `limit` bytes, read a block at a time (what reading
+    it whole will cost can be known before it is read)."""
+    check_input_file(path, missing, limit)
+    handle, _ = _open_regular(path, missing)
+    lines, read, last = 0, 0, b"\n"
+    with handle:
+        try:
+            while block := handle.read(_COUNT_BLOCK):
+                lines, read, last = lines + block.count(b"\n"), read + len(block), block[-1:]
+                if read > limit:
+                    raise _too_large(path, read, limit)
+        except OSError as error:
+            raise InputError(path, f"cannot be read ({error.strerror})") from None
+    return lines + (last != b"\n")

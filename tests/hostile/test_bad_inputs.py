@@ -9,6 +9,7 @@ import csv
 import json
 import os
 import shutil
+import tracemalloc
 import zlib
 from pathlib import Path
 
@@ -19,6 +20,7 @@ import yaml
 
 from neoslam.datasets.kitti import read_grey_image
 from neoslam.errors import InputError
+from neoslam.inputs import count_lines, read_input_bytes
 from neoslam.io.image_header import image_size, oversized
 from neoslam.text import read_yaml
 
@@ -550,3 +552,34 @@ def test_a_simulation_whose_patches_exceed_the_memory_budget_is_refused_before_i
         "simulate", "--route", "block", "--out", tmp_path / "o", env={**env, "NEOSLAM_MAX_MEMORY": "lots"}
     )
     cli.one_line_error(result, "NEOSLAM_MAX_MEMORY: 'lots' is not an amount of memory")
+
+
+def test_trajectories_whose_evaluation_exceeds_the_memory_budget_are_refused_before_they_are_read(cli, tmp_path: Path):
+    """`evaluate` counts the lines of both files a block at a time and refuses, before it reads them, a pair whose
+    evaluation would exceed the budget (BYTES_PER_LINE, measured by benchmarks/evaluation.py); the JSON it was to
+    write is not made. Within the budget the same pair is evaluated."""
+    lines = "".join(f"{0.1 * k:.1f} {k} 0 0 0 0 0 1\n" for k in range(2000))
+    estimate, truth = tmp_path / "estimate.txt", tmp_path / "truth.txt"
+    estimate.write_text(lines)
+    truth.write_text(lines)
+    out = tmp_path / "metrics.json"
+    result = cli.invoke("evaluate", estimate, truth, "--json", out, env={"NEOSLAM_MAX_MEMORY": "1M"})
+    cli.one_line_error(result, "evaluate: estimate.txt and truth.txt (4,000 lines)", "1.0 MiB", "NEOSLAM_MAX_MEMORY")
+    assert not out.exists()
+    assert cli.invoke("evaluate", estimate, truth, env={"NEOSLAM_MAX_MEMORY": "1G"}).exit_code == 0
+
+
+def test_lines_are_counted_without_reading_the_file_whole_and_a_read_is_sized_by_the_file(tmp_path: Path):
+    path = tmp_path / "t.txt"
+    for text, lines in (("", 0), ("a", 1), ("a\n", 1), ("a\nb", 2), ("a\n" * 3_000_000, 3_000_000)):
+        path.write_text(text)
+        assert count_lines(path) == lines
+    with pytest.raises(InputError, match="holds at most 100"):
+        count_lines(path, limit=100)
+    path.write_text("x")
+    tracemalloc.start()
+    try:
+        assert read_input_bytes(path) == b"x"  # not a buffer of the 256 MiB a text file may have
+        assert tracemalloc.get_traced_memory()[1] < 2**20
+    finally:
+        tracemalloc.stop()

@@ -13,13 +13,18 @@ from neoslam.errors import ConfigError, InputError
 from neoslam.evaluation.report import loop_metrics, trajectory_metrics
 from neoslam.evaluation.trajectory_metrics import associate
 from neoslam.geometry import is_single_place
+from neoslam.inputs import count_lines
 from neoslam.io.atomic import atomic_file, check_target_file
 from neoslam.io.results import KEYFRAME_FRAMES, read_keyframe_frames, read_loop_closures, write_metrics
 from neoslam.io.trajectory_files import read_trajectory
+from neoslam.memory import check_budget
 
 __all__ = ["evaluate_files"]
 
 MIN_ALIGNMENT_POSES = 3  # a sim3 alignment needs three points
+# Peak memory of reading and evaluating two trajectories, per line of the two files: measured 234 bytes (TUM) and
+# 324 (KITTI) with `benchmarks/evaluate_memory.py` on files of 1 million lines each.
+BYTES_PER_LINE = 352
 RecallOver = Literal["keyframes", "frames"]
 RECALL_CHOICES = ("keyframes", "frames")
 
@@ -48,6 +53,7 @@ def evaluate_files(
     inputs = [estimate_path, truth_path, loops_path, keyframes_path, *read]
     if json_out is not None:
         check_target_file(json_out, overwrite, inputs)
+    _check_memory(estimate_path, truth_path)
     estimate = read_trajectory(estimate_path, estimate_format)
     truth = read_trajectory(truth_path, truth_format)
     try:
@@ -70,6 +76,13 @@ def evaluate_files(
         with atomic_file(json_out, overwrite, inputs) as staging:
             write_metrics(staging, metrics)
     return metrics
+
+
+def _check_memory(*paths: Path) -> None:
+    """Refuse, before reading them, trajectories whose evaluation would exceed the memory budget."""
+    lines = sum(count_lines(path) for path in paths)
+    names = " and ".join(path.name for path in paths)
+    check_budget(f"evaluate: {names} ({lines:,} lines)", lines * BYTES_PER_LINE)
 
 
 def _query_frames(loops: Path, keyframes: Path | None, recall_over: str, frames: int) -> np.ndarray | None:

@@ -43,6 +43,7 @@ KITTI_SEGMENT_LENGTHS_M = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.
 KITTI_STEP_FRAMES = 10  # the devkit's step_size between first frames of segments
 PERCENT = 100.0
 DRIFT_PATH_M = 100.0  # rotational drift is reported per 100 m
+SEGMENT_CHUNK = 65_536  # drift segments evaluated at once: about 25 MB of pose stacks
 
 
 @dataclass(frozen=True, slots=True)
@@ -145,7 +146,14 @@ def associate(
             f"{max_time_diff} s and time offset {offset} s"
         )
     est_idx, ref_idx = (long_idx, short_idx) if est_is_longer else (short_idx, long_idx)
-    return est.subset(est_idx), ref.subset(ref_idx)
+    return _subset(est, est_idx), _subset(ref, ref_idx)
+
+
+def _subset(trajectory: Trajectory, indices: np.ndarray) -> Trajectory:
+    """The poses at `indices`; the trajectory itself when they are all of it (a long one is not copied)."""
+    if len(indices) == len(trajectory) and np.array_equal(indices, np.arange(len(trajectory))):
+        return trajectory
+    return trajectory.subset(indices)
 
 
 def _check_same_length(est: Trajectory, ref: Trajectory) -> None:
@@ -159,20 +167,27 @@ def align(est: Trajectory, ref: Trajectory, mode: AlignMode = "se3") -> tuple[Tr
 
 
 def _aligned(est: Trajectory, ref: Trajectory, mode: AlignMode) -> tuple[Trajectory, SimilarityTransform]:
-    _check_same_length(est, ref)
+    transform = _alignment(est, ref, mode)
     if mode == "none":
-        transform = SimilarityTransform(np.eye(3), np.zeros(3), 1.0)
         return est, transform
-    if mode not in ("se3", "sim3"):
-        raise ValueError(f"unknown alignment mode {mode!r}; expected 'se3', 'sim3' or 'none'")
-    transform = umeyama_alignment(est.positions, ref.positions, with_scale=mode == "sim3")
     return Trajectory(est.timestamps, transform.apply_to_poses(est.poses)), transform
 
 
+def _alignment(est: Trajectory, ref: Trajectory, mode: AlignMode) -> SimilarityTransform:
+    """The transform that moves `est` onto `ref` (the identity for "none")."""
+    _check_same_length(est, ref)
+    if mode == "none":
+        return SimilarityTransform(np.eye(3), np.zeros(3), 1.0)
+    if mode not in ("se3", "sim3"):
+        raise ValueError(f"unknown alignment mode {mode!r}; expected 'se3', 'sim3' or 'none'")
+    return umeyama_alignment(est.positions, ref.positions, with_scale=mode == "sim3")
+
+
 def absolute_trajectory_error(est: Trajectory, ref: Trajectory, align: AlignMode = "se3") -> ErrorStats:
-    """ATE: per-pose position error in metres after aligning est onto ref (evo_ape, translation part)."""
-    aligned, _ = _aligned(est, ref, align)
-    return ErrorStats.from_errors(np.linalg.norm(aligned.positions - ref.positions, axis=1))
+    """ATE: per-pose position error in metres after aligning est onto ref (evo_ape, translation part); only the
+    positions are moved (a long trajectory's aligned poses would be another copy of it)."""
+    transform = _alignment(est, ref, align)
+    return ErrorStats.from_errors(np.linalg.norm(transform.apply_to_points(est.positions) - ref.positions, axis=1))
 
 
 def _pairs_by_frames(n_poses: int, delta: int) -> np.ndarray:
@@ -254,11 +269,14 @@ def kitti_drift(
     steps = np.linalg.norm(np.diff(ref.positions, axis=0), axis=1)
     distances = np.concatenate([[0.0], np.cumsum(steps)])
     first, last, seg_len = _segments(distances, step, lengths)
-    ref_rel = _devkit_relative(ref.poses[first], ref.poses[last])
-    est_rel = _devkit_relative(est.poses[first], est.poses[last])
-    error = _devkit_relative(ref_rel, est_rel)
-    t_err = np.linalg.norm(error[:, :3, 3], axis=1) / seg_len * PERCENT
-    r_err = np.degrees(rotation_angle(error[:, :3, :3])) / seg_len * DRIFT_PATH_M
+    t_err, r_err = np.empty(len(first)), np.empty(len(first))
+    for chunk in range(0, len(first), SEGMENT_CHUNK):  # a few (k, 4, 4) stacks at a time, however long the drive
+        part = slice(chunk, chunk + SEGMENT_CHUNK)
+        ref_rel = _devkit_relative(ref.poses[first[part]], ref.poses[last[part]])
+        est_rel = _devkit_relative(est.poses[first[part]], est.poses[last[part]])
+        error = _devkit_relative(ref_rel, est_rel)
+        t_err[part] = np.linalg.norm(error[:, :3, 3], axis=1) / seg_len[part] * PERCENT
+        r_err[part] = np.degrees(rotation_angle(error[:, :3, :3])) / seg_len[part] * DRIFT_PATH_M
     return _drift_stats(first, seg_len, t_err, r_err)
 
 

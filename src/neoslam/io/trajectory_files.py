@@ -54,6 +54,7 @@ MAX_TIMESTAMP_S = 1e12
 
 # Commas with optional spaces, or runs of whitespace; "1,,2" yields an empty token, reported as not a number.
 _SEPARATOR = re.compile(r"\s*,\s*|\s+")
+_TOKEN_CHUNK = 2**22  # characters of lines whose tokens are counted at once
 _TUM_COLUMNS = 8
 _KITTI_COLUMNS = 12
 
@@ -105,9 +106,22 @@ def _read_plain(text: str, columns: int) -> tuple[np.ndarray, np.ndarray] | None
             return None
     if values.size != rows * columns or not np.isfinite(values).all():
         return None
-    if not np.all(_tokens_per_line(text) == columns):  # whole rows, not the right count of values reflowed
+    if not _every_line_has(text, columns):  # whole rows, not the right count of values reflowed
         return None
     return values.reshape(rows, columns), np.arange(1, rows + 1)
+
+
+def _every_line_has(text: str, columns: int) -> bool:
+    """Whether every line holds `columns` whitespace-separated tokens, counted over the bytes a chunk of lines at a
+    time (the byte masks of a whole 256 MiB file would take gigabytes)."""
+    start = 0
+    while start < len(text):
+        end = text.find("\n", start + _TOKEN_CHUNK)
+        end = len(text) if end < 0 else end + 1
+        if not np.all(_tokens_per_line(text[start:end]) == columns):
+            return False
+        start = end
+    return True
 
 
 def _tokens_per_line(text: str) -> np.ndarray:
