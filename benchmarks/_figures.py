@@ -108,6 +108,65 @@ def delivery_success(result: dict[str, Any]) -> Figure:
     return figure
 
 
+CLASS_COLOURS = {"car": "tab:blue", "truck": "tab:purple", "person": "tab:orange", "bicycle": "tab:green"}
+DRIVE_COLUMNS = 3
+
+
+def drive_trajectories(result: dict[str, Any]) -> Figure:
+    """Each drive from above: the ground truth, the odometry and the corrected map's trajectory (aligned to the truth
+    as the ATE is), the closures accepted (true or false) and the map's objects by class (trajectories)."""
+    drives = result.get("figures", {}).get("drives", [])
+    if not drives:
+        raise KeyError("trajectories: no drives in the stored result for its figure")
+    columns = DRIVE_COLUMNS if len(drives) % DRIVE_COLUMNS else DRIVE_COLUMNS + 1  # a cell left for the legend
+    rows = -(-len(drives) // columns)
+    figure, grid = plt.subplots(rows, columns, figsize=(4.0 * columns, 3.8 * rows), squeeze=False)
+    for axes in grid.ravel()[len(drives) :]:
+        axes.axis("off")
+    for axes, drive in zip(grid.ravel(), drives, strict=False):
+        _draw_drive(axes, drive)
+    handles, labels = _legend_entries(grid.ravel()[: len(drives)])
+    grid.ravel()[len(drives)].legend(handles, labels, loc="center", fontsize=9, frameon=False, markerscale=3)
+    return figure
+
+
+def _draw_drive(axes: Any, drive: dict[str, Any]) -> None:
+    objects = drive["object_points"]
+    if objects:
+        labels = drive["object_labels"]
+        for label in sorted(set(labels)):
+            mine = [k for k, other in enumerate(labels) if other == label]
+            xs, ys = [objects[k][0] for k in mine], [objects[k][1] for k in mine]
+            axes.plot(xs, ys, ".", markersize=2, color=CLASS_COLOURS.get(label, "tab:gray"), label=f"object: {label}")
+    styles = {"truth": ("black", "-", "ground truth"), "odometry": ("tab:gray", "--", "odometry")}
+    styles["corrected"] = ("tab:red", "-", "corrected map")
+    for name, (colour, line, label) in styles.items():
+        path = drive["paths"][name]
+        axes.plot([p[0] for p in path], [p[1] for p in path], line, color=colour, linewidth=1.0, label=label)
+    closures = drive["closure_points"]
+    for verdict, marker, label in ((True, "o", "closure (true)"), (False, "x", "closure (false)")):
+        chosen = [p for p, ok in zip(closures, drive["closure_true"], strict=True) if ok is verdict]
+        if chosen:
+            axes.plot([p[0] for p in chosen], [p[1] for p in chosen], marker, color="tab:green" if verdict else
+                      "magenta", markersize=3, fillstyle="none", label=label)  # fmt: skip
+    ate = drive["ate_m"]
+    shown = "-" if ate is None else f"{ate:.2f} m"  # a drive the ATE cannot align
+    axes.set_title(f"{drive['drive']}: ATE {shown}, {drive['closures']} closures", fontsize=9)
+    axes.set_aspect("equal", adjustable="datalim")
+    axes.tick_params(labelsize=7)
+    axes.grid(alpha=0.3)
+
+
+def _legend_entries(axes_list: Any) -> tuple[list[Any], list[str]]:
+    """Every line drawn in any of the axes, once per label."""
+    seen: dict[str, Any] = {}
+    for axes in axes_list:
+        for handle, label in zip(*axes.get_legend_handles_labels(), strict=True):
+            seen.setdefault(label, handle)
+    order = sorted(seen, key=lambda label: (label.startswith("object"), label.startswith("closure"), label))
+    return [seen[label] for label in order], order
+
+
 # (benchmark, figure) -> (the function, the caption the page gives it)
 FIGURES: dict[tuple[str, str], tuple[Callable[[dict[str, Any]], Figure], str]] = {
     ("navigation", "planning"): (planning_speed, "Route planning time against map size"),
@@ -115,6 +174,7 @@ FIGURES: dict[tuple[str, str], tuple[Callable[[dict[str, Any]], Figure], str]] =
     ("loops", "speed"): (loop_query_speed, "Loop query time against stored keyframes"),
     ("live", "latency"): (live_latency, "Live node latency and drops against the camera's rate"),
     ("places", "recall"): (place_recall, "Loop recall at precision 1.0 by drive"),
+    ("trajectories", "drives"): (drive_trajectories, "The drives from above: truth, odometry, corrected map, closures"),
 }
 
 

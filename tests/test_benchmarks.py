@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from benchmarks import harness, render
+from benchmarks import _figures, harness, render
 
 
 def _start(tmp_path: Path, *argv: str, arguments=None) -> harness.Run:
@@ -162,3 +162,29 @@ def test_the_renderer_draws_the_marked_figures_from_the_stored_result(tmp_path: 
     assert render.main([*arguments, "--check"]) == 0  # drawn again, the same bytes
     page.write_text("<!-- figure: navigation nothing -->\n<!-- end figure -->\n")
     assert render.main(arguments) == 2
+
+
+def test_the_trajectory_figure_draws_each_drive_with_its_paths_closures_and_classes() -> None:
+    """A panel a drive (titled with its ATE and closures) and a legend naming the paths, true and false closures
+    and each class of object."""
+    drive = {
+        "drive": "05",
+        "ate_m": 1.5,
+        "closures": 2,
+        "paths": {name: [[0.0, 0.0], [10.0, 1.0], [20.0, 0.0]] for name in ("truth", "odometry", "corrected")},
+        "closure_points": [[10.0, 1.0], [20.0, 0.0]],
+        "closure_true": [True, False],
+        "object_points": [[5.0, 3.0], [15.0, -3.0]],
+        "object_labels": ["car", "person"],
+    }
+    real = drive | {"drive": "real", "ate_m": None, "closures": 0, "closure_points": [], "closure_true": []}
+    figure = _figures.drive_trajectories({"figures": {"drives": [drive, real]}})
+    titles = [axes.get_title() for axes in figure.axes]
+    assert titles[:2] == ["05: ATE 1.50 m, 2 closures", "real: ATE -, 0 closures"]
+    legend = figure.axes[2].get_legend()
+    assert [t.get_text() for t in legend.get_texts()] == [
+        "corrected map", "ground truth", "odometry", "closure (false)", "closure (true)", "object: car",
+        "object: person",
+    ]  # fmt: skip
+    svg = _figures.svg_text(figure)
+    assert "closure (false)" in svg and "object: person" in svg

@@ -12,6 +12,7 @@ import errno
 import os
 import stat
 from pathlib import Path
+from typing import BinaryIO
 
 from neoslam.errors import InputError
 
@@ -83,7 +84,7 @@ def check_input_folder_files(folder: Path) -> None:
             raise _refusal(entry, mode)
 
 
-def _open_regular(path: Path, missing: str):
+def _open_regular(path: Path, missing: str) -> tuple[BinaryIO, int]:
     """The file opened for reading without blocking, checked again once open (a path swapped for a FIFO after the
     check cannot hang a read)."""
     try:

@@ -2,7 +2,8 @@
 
 The budget is `NEOSLAM_MAX_MEMORY` (bytes, or with a K, M or G suffix: `8G`), by default a quarter of the machine's
 memory. Work whose cost its configuration or an input's header gives (a simulation's appearance patches, an
-image's pixels) is checked against it first: one line naming what would exceed it, nothing allocated.
+image's pixels, the lines of the trajectories `evaluate` reads) is checked against it first: one line naming what
+would exceed it, nothing allocated.
 """
 
 from __future__ import annotations

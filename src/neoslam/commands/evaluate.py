@@ -22,8 +22,8 @@ from neoslam.memory import check_budget
 __all__ = ["evaluate_files"]
 
 MIN_ALIGNMENT_POSES = 3  # a sim3 alignment needs three points
-# Peak memory of reading and evaluating two trajectories, per line of the two files: measured 234 bytes (TUM) and
-# 324 (KITTI) with `benchmarks/evaluate_memory.py` on files of 1 million lines each.
+# Peak memory of reading and evaluating two trajectories, per line of the two files: measured 231 bytes (TUM) and
+# 325 (KITTI) on files of a million lines each (`python -m benchmarks.evaluation`).
 BYTES_PER_LINE = 352
 RecallOver = Literal["keyframes", "frames"]
 RECALL_CHOICES = ("keyframes", "frames")
