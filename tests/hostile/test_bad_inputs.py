@@ -583,3 +583,12 @@ def test_lines_are_counted_without_reading_the_file_whole_and_a_read_is_sized_by
         assert tracemalloc.get_traced_memory()[1] < 2**20
     finally:
         tracemalloc.stop()
+
+
+def test_a_detections_video_needs_camera_images(cli, dataset: Path, tmp_path: Path) -> None:
+    """The default scenario and a simulated dataset hold detections, no images: one line each, nothing written."""
+    result = cli.invoke("run", "--out", tmp_path / "a", "--detections-video", "-q")
+    cli.one_line_error(result, "--detections-video draws camera images", "not the default scenario")
+    result = cli.invoke("run", dataset, "--out", tmp_path / "b", "--detections-video", "-q")
+    cli.one_line_error(result, "--detections-video draws camera images", "holds simulated detections, no images")
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()

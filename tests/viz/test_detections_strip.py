@@ -1,5 +1,6 @@
 """The detections strip of a run on real images: some keyframe frames, evenly spread, each left image with its
-detections' boxes in their class colour and a label of class, score and depth, two images a row."""
+detections' boxes in their class colour and a label of class, score and depth, two images a row; and the video of
+every frame so drawn."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from neoslam.viz.detections_strip import (
     SeenObjects,
     strip_frames,
     write_detections_strip,
+    write_detections_video,
 )
 
 
@@ -53,3 +55,24 @@ def test_boxes_are_drawn_in_their_class_colour_on_the_frames_images(tmp_path: Pa
     assert np.all(right[150, 50] == 128)  # no box where the car was: each image its own frame's
     assert not write_detections_strip(tmp_path / "none.png", lambda frame: image, np.zeros(0, dtype=int), seen)
     assert not (tmp_path / "none.png").exists()
+
+
+def test_the_video_has_every_frame_drawn_at_the_cameras_rate_and_the_same_frames_give_the_same_bytes(tmp_path):
+    seen = SeenObjects()
+    for index in range(5):
+        seen(None, _frame(index, [("car", (100.0 + 40 * index, 100.0, 300.0 + 40 * index, 250.0), 12.5)]), np.eye(4))
+    image = np.full((376, 1240), 128, dtype=np.uint8)
+    first, second = tmp_path / "a.avi", tmp_path / "b.avi"
+    for path in (first, second):
+        assert write_detections_video(path, lambda frame: image, sorted(seen.frames), seen, 10.0) == 5
+    assert first.read_bytes() == second.read_bytes()
+    video = cv2.VideoCapture(str(first))
+    assert int(video.get(cv2.CAP_PROP_FRAME_COUNT)) == 5 and video.get(cv2.CAP_PROP_FPS) == 10.0
+    for index in range(5):
+        ok, picture = video.read()
+        assert ok and picture.shape == (188, TILE_WIDTH, 3)
+        edge = (100 + 40 * index) // 2 + 1  # the car's left edge, halved, inside the 2-pixel line
+        blue = picture[125, edge].astype(int) - picture[125, edge - 12].astype(int)  # against the grey beside it
+        assert blue[0] > 40, index  # the box moves with the car from frame to frame (JPEG: near its colour)
+    assert write_detections_video(tmp_path / "none.avi", lambda frame: image, [], seen, 10.0) == 0
+    assert not (tmp_path / "none.avi").exists()

@@ -96,6 +96,14 @@ def run_command(
     localise_only: LocaliseOnlyOption = False,
     goal: GoalOption = None,
     stale: StaleOption = False,
+    detections_video: Annotated[
+        bool,
+        typer.Option(
+            "--detections-video",
+            metavar=FLAG,
+            help="On images: every frame with its detections drawn, as plots/detections.avi.",
+        ),
+    ] = False,
     config: ConfigOption = None,
     overwrite: OverwriteOption = False,
     quiet: QuietOption = False,
@@ -121,6 +129,7 @@ def run_command(
             localise_only=localise_only,
             goal=goal,
             stale_goal=stale,
+            detections_video=detections_video,
         )
     except (NeoSLAMError, OSError) as error:
         fail(error)

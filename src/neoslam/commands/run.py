@@ -9,6 +9,8 @@ from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from neoslam.commands.run_metrics import run_metrics, session_metrics
 from neoslam.commands.simulate import DEFAULT_ROUTE, record
 from neoslam.config import NeoSLAMConfig
@@ -33,13 +35,15 @@ from neoslam.navigation.session import GoalGuidance
 from neoslam.perception.frontend import ImageDataset
 from neoslam.pipeline import RunResult, run
 from neoslam.store.recording import MapRecording, check_map_path, map_recording
-from neoslam.viz.detections_strip import SeenObjects, write_detections_strip
+from neoslam.viz.detections_strip import SeenObjects, write_detections_strip, write_detections_video
 from neoslam.viz.rerun_view import check_rerun_target, recording_target, rerun_session
 from neoslam.viz.run_plots import write_plots
 
 __all__ = ["observers", "run_dataset", "with_backend", "write_results"]
 
 DETECTIONS_PLOT = "detections.png"  # a run on images: what the detector saw at some keyframes
+DETECTIONS_VIDEO = "detections.avi"  # and, when asked, at every frame
+VIDEO_FPS_RANGE = (1.0, 60.0)  # a video plays at the camera's rate, within these
 
 
 def with_backend(config: NeoSLAMConfig, backend: str | None) -> NeoSLAMConfig:
@@ -77,13 +81,15 @@ def run_dataset(
     localise_only: bool = False,
     goal: str | None = None,
     stale_goal: bool = False,
+    detections_video: bool = False,
 ) -> dict[str, Any]:
     """Run NeoSLAM on a dataset folder, KITTI sequence or ROS bag (or simulate the default scenario first) and
     write the results folder. `read` names further files the run reads (a config file), which the output must not
     replace. `rerun`: "spawn" shows the run live in the Rerun viewer, a path ending .rrd records it there.
     `map_path`: a map file the run starts from and extends (created if missing; see neoslam.store), written as the
     run goes; with `localise_only` the run uses it and changes nothing in it. `goal`: guidance towards it (the
-    goal language of neoslam.navigation; `stale_goal` allows a stale object), written per frame to guidance.csv."""
+    goal language of neoslam.navigation; `stale_goal` allows a stale object), written per frame to guidance.csv.
+    `detections_video`: on images, every frame with its detections drawn, plots/detections.avi."""
     check_rerun_target(rerun)
     guidance = GoalGuidance(goal, config, stale_goal) if goal is not None else None
     read_paths = [data, *inputs.files(), *read]
@@ -91,11 +97,15 @@ def run_dataset(
         check_map_path(map_path, out, read_paths, localise_only)
     elif localise_only:
         raise ConfigError("--localise-only needs --map FILE")
+    if detections_video and data is None:
+        raise ConfigError("--detections-video draws camera images: it needs a run on images, not the default scenario")
     with atomic_directory(out, overwrite, read_paths) as staging:
         if data is None:
             write_dataset(staging / "dataset", record(config, route=DEFAULT_ROUTE, progress=progress))
             data = staging / "dataset"
         dataset = open_dataset(data, config, inputs)
+        if detections_video and not isinstance(dataset, ImageDataset):
+            raise ConfigError(f"--detections-video draws camera images: {data} holds simulated detections, no images")
         viewer = recording_target(rerun, out, staging)
         kept = map_recording(map_path, config, localise_only) if map_path is not None else nullcontext(None)
         with kept as session, rerun_session(viewer, dataset, overwrite, [data, *inputs.files(), *read]) as on_step:
@@ -126,7 +136,19 @@ def run_dataset(
             pairs = dataset.sequence.stereo_pair
             strip = staging / "plots" / DETECTIONS_PLOT
             write_detections_strip(strip, lambda frame: pairs(frame)[0], result.keyframe_frames, seen)
+            if detections_video:
+                video = staging / "plots" / DETECTIONS_VIDEO
+                write_detections_video(video, lambda frame: pairs(frame)[0], sorted(seen.frames), seen, _fps(result))
+
     return metrics
+
+
+def _fps(result: RunResult) -> float:
+    """The camera's rate, from the run's timestamps, within VIDEO_FPS_RANGE."""
+    steps = np.diff(result.odometry.timestamps)
+    steps = steps[steps > 0]
+    rate = 1.0 / float(np.median(steps)) if len(steps) else VIDEO_FPS_RANGE[0]
+    return float(np.clip(rate, *VIDEO_FPS_RANGE))
 
 
 def write_results(

@@ -1,5 +1,7 @@
 """What the detector saw, on the camera's images (plots/detections.png of a run on real images): the left images of
-some of the run's keyframe frames, each object's box with its class, score and stereo depth.
+some of the run's keyframe frames, each object's box with its class, score and stereo depth; and, when asked
+(`neoslam run --detections-video`), every frame so drawn as a video, plots/detections.avi (Motion JPEG, written by
+OpenCV's own encoder: no codec library needed, and the same frames give the same bytes).
 
 `SeenObjects` is a step observer that keeps every frame's detections (class, score, left box, depth; not the
 patches) while the run goes, a few dozen bytes an object; after the run, `write_detections_strip` reads the chosen
@@ -7,6 +9,7 @@ frames' left images again from the dataset and draws them in a grid."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,7 +18,14 @@ import numpy as np
 
 from neoslam.types import Frame
 
-__all__ = ["SeenObjects", "strip_frames", "detections_strip", "write_detections_strip", "STRIP_FRAMES"]
+__all__ = [
+    "STRIP_FRAMES",
+    "SeenObjects",
+    "detections_strip",
+    "strip_frames",
+    "write_detections_strip",
+    "write_detections_video",
+]
 
 STRIP_FRAMES = 8  # keyframe frames drawn: evenly spread over the run
 STRIP_COLUMNS = 2
@@ -23,6 +33,7 @@ TILE_WIDTH = 620  # pixels of each image in the strip (KITTI's 1241 halved)
 BOX_COLOURS = {"car": (200, 120, 30), "truck": (160, 60, 150), "bicycle": (50, 160, 40), "person": (30, 130, 230)}
 OTHER_COLOUR = (120, 120, 120)  # BGR: a class beyond the four
 FONT = cv2.FONT_HERSHEY_SIMPLEX
+VIDEO_CODEC = "MJPG"
 
 
 @dataclass(frozen=True, slots=True)
@@ -99,3 +110,28 @@ def write_detections_strip(path: Path, left_image, keyframe_frames: np.ndarray, 
     if not cv2.imwrite(str(path), strip):
         raise OSError(f"{path}: could not write the image")
     return True
+
+
+def write_detections_video(
+    path: Path, left_image: Callable[[int], np.ndarray], frames: Iterable[int], seen: SeenObjects, fps: float
+) -> int:
+    """plots/detections.avi: each of `frames` (in order) drawn as the strip draws a tile, at `fps` frames a second;
+    the number of frames written (0: no file)."""
+    writer, size, written = None, (0, 0), 0
+    try:
+        for frame in frames:
+            tile = _tile(left_image(frame), frame, seen.frames.get(frame, ()))
+            if writer is None:
+                size = (tile.shape[1], tile.shape[0])
+                fourcc = cv2.VideoWriter_fourcc(*VIDEO_CODEC)
+                writer = cv2.VideoWriter(str(path), cv2.CAP_OPENCV_MJPEG, fourcc, fps, size)
+                if not writer.isOpened():
+                    raise OSError(f"{path}: could not write the video")
+            if (tile.shape[1], tile.shape[0]) != size:  # a frame of another size: scaled to the first's
+                tile = cv2.resize(tile, size, interpolation=cv2.INTER_AREA)
+            writer.write(tile)
+            written += 1
+    finally:
+        if writer is not None:
+            writer.release()
+    return written
