@@ -36,6 +36,10 @@ LINES, QUICK_LINES = 1_000_000, 100_000
 BASE_LINES = 10  # the pair whose peak is the command's own
 FRAME_PERIOD_S = 0.1
 STEP_M = 1.0  # a drive along x, a metre a frame, the estimate 1 % long and 1 cm off
+# Lines as short as their values allow (the zeros and ones of the rotation without decimals): the files of the
+# longest runs stay under the 256 MiB a trajectory file may hold.
+TUM_FORMAT = ["%.1f", "%.2f", "%.3f", "%d", "%d", "%d", "%d", "%d"]
+KITTI_FORMAT = ["%d", "%d", "%d", "%.3f", "%d", "%d", "%d", "%d", "%d", "%d", "%d", "%.2f"]
 
 
 def arguments(parser: argparse.ArgumentParser) -> None:
@@ -70,11 +74,11 @@ def _write_pair(folder: Path, form: str, lines: int) -> tuple[Path, Path]:
                 x, y = k * STEP_M * scale, np.sin(k * 1e-3) + offset
                 if form == "tum":
                     rows = np.column_stack([k * FRAME_PERIOD_S, x, y, 0 * k, 0 * k, 0 * k, 0 * k, 1 + 0 * k])
-                    np.savetxt(handle, rows, fmt="%.4f")
+                    np.savetxt(handle, rows, fmt=TUM_FORMAT)
                 else:  # camera poses: the camera's z is the robot's x, its -x the robot's y
                     one, zero = np.ones_like(x), np.zeros_like(x)
                     rows = np.column_stack([one, zero, zero, -y, zero, one, zero, zero, zero, zero, one, x])
-                    np.savetxt(handle, rows, fmt="%.4f")
+                    np.savetxt(handle, rows, fmt=KITTI_FORMAT)
     return paths
 
 
