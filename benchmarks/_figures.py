@@ -130,25 +130,29 @@ def drive_trajectories(result: dict[str, Any]) -> Figure:
     return figure
 
 
+PATH_STYLES = {  # path -> (colour, line, legend)
+    "truth": ("black", "-", "ground truth"),
+    "odometry": ("tab:gray", "--", "odometry"),
+    "corrected": ("tab:red", "-", "corrected map"),
+}
+CLOSURE_STYLES = {True: ("o", "tab:green", "closure (true)"), False: ("x", "magenta", "closure (false)")}
+
+
+def _draw_xy(axes: Any, points: list[list[float]], style: str, **options: Any) -> None:
+    if points:
+        axes.plot([p[0] for p in points], [p[1] for p in points], style, **options)
+
+
 def _draw_drive(axes: Any, drive: dict[str, Any]) -> None:
-    objects = drive["object_points"]
-    if objects:
-        labels = drive["object_labels"]
-        for label in sorted(set(labels)):
-            mine = [k for k, other in enumerate(labels) if other == label]
-            xs, ys = [objects[k][0] for k in mine], [objects[k][1] for k in mine]
-            axes.plot(xs, ys, ".", markersize=2, color=CLASS_COLOURS.get(label, "tab:gray"), label=f"object: {label}")
-    styles = {"truth": ("black", "-", "ground truth"), "odometry": ("tab:gray", "--", "odometry")}
-    styles["corrected"] = ("tab:red", "-", "corrected map")
-    for name, (colour, line, label) in styles.items():
-        path = drive["paths"][name]
-        axes.plot([p[0] for p in path], [p[1] for p in path], line, color=colour, linewidth=1.0, label=label)
-    closures = drive["closure_points"]
-    for verdict, marker, label in ((True, "o", "closure (true)"), (False, "x", "closure (false)")):
-        chosen = [p for p, ok in zip(closures, drive["closure_true"], strict=True) if ok is verdict]
-        if chosen:
-            axes.plot([p[0] for p in chosen], [p[1] for p in chosen], marker, color="tab:green" if verdict else
-                      "magenta", markersize=3, fillstyle="none", label=label)  # fmt: skip
+    objects, labels = drive["object_points"], drive["object_labels"]
+    for label in sorted(set(labels)):
+        mine = [point for point, other in zip(objects, labels, strict=True) if other == label]
+        _draw_xy(axes, mine, ".", markersize=2, color=CLASS_COLOURS.get(label, "tab:gray"), label=f"object: {label}")
+    for name, (colour, line, legend) in PATH_STYLES.items():
+        _draw_xy(axes, drive["paths"][name], line, color=colour, linewidth=1.0, label=legend)
+    for verdict, (marker, colour, legend) in CLOSURE_STYLES.items():
+        chosen = [p for p, ok in zip(drive["closure_points"], drive["closure_true"], strict=True) if ok is verdict]
+        _draw_xy(axes, chosen, marker, color=colour, markersize=3, fillstyle="none", label=legend)
     ate = drive["ate_m"]
     shown = "-" if ate is None else f"{ate:.2f} m"  # a drive the ATE cannot align
     axes.set_title(f"{drive['drive']}: ATE {shown}, {drive['closures']} closures", fontsize=9)

@@ -4,9 +4,10 @@ objects kept for drawing.
 The simulated drives are the real KITTI ground truth of 00, 02, 05, 06 and 08 (and any built-in route named, such as
 `town`), simulated as `neoslam simulate` does with the `vo` odometry and the `real` detection profile, seed 1;
 `real` is the real KITTI 06 frames of kitti_06_51, through the front end with the default detector. For each: the
-ground truth, the odometry and the corrected trajectory of the final map (both aligned to the truth as the ATE
-aligns them: se3), the frames at which a loop closure was accepted (true or false against the ground truth, by the
-evaluation's criteria), the map's objects by class, and the ATE of the odometry and of the corrected trajectory.
+ground truth, the odometry and the corrected trajectory of the final map (both aligned to the truth as the ATE aligns
+them, `evaluation.alignment`), the frames at which a loop closure was accepted (true or false against the ground
+truth, by the evaluation's criteria), the map's objects by class, and the ATE of the odometry and of the corrected
+trajectory as the run's metrics.json gives them.
 Paths keep at most POINTS points (every k-th frame) and positions are rounded to 1 cm, so that the result stays
 small; the figures and the table come from the same run.
 
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import tempfile
+import time
 from pathlib import Path
 from typing import Any
 
@@ -24,14 +26,15 @@ import numpy as np
 
 from benchmarks import harness
 from benchmarks.harness import require_data
+from neoslam.commands.run_metrics import run_metrics
 from neoslam.commands.simulate import record
 from neoslam.config import NeoSLAMConfig
 from neoslam.config.profiles import simulation_config
 from neoslam.datasets.opening import ImageInputs, open_dataset
 from neoslam.datasets.simulated import write_dataset
-from neoslam.evaluation.report import closure_verdicts, trajectory_metrics
-from neoslam.evaluation.trajectory_metrics import align, associate
-from neoslam.pipeline import NeoSLAM
+from neoslam.evaluation.report import closure_verdicts
+from neoslam.evaluation.trajectory_metrics import align
+from neoslam.pipeline import run
 from neoslam.sim.routes import ROUTES
 from neoslam.types import Trajectory
 
@@ -79,42 +82,38 @@ def _path(trajectory: Trajectory, step: int) -> list[list[float]]:
 
 
 def run_drive(name: str) -> dict[str, Any]:
-    """One drive: run it, evaluate it against its ground truth and keep what its figure draws."""
+    """One drive: run it as `neoslam run` does, with its metrics.json figures, and keep what its figure draws."""
     with tempfile.TemporaryDirectory(prefix="neoslam-trajectories-") as folder:
         dataset, config, kind = _dataset(name, Path(folder))
-        slam = NeoSLAM(config, session_name=dataset.name)
-        for frame in dataset.frames():
-            slam.step(frame)
-        result = slam.result(np.zeros(0))
+        started = time.perf_counter()
+        result = run(dataset.frames(), config, total=len(dataset), progress=False, session_name=dataset.name)
+        metrics = run_metrics(dataset, result, config, time.perf_counter() - started)
     truth = dataset.ground_truth
     if truth is None:
         raise SystemExit(f"{name}: the drive has no ground truth to draw against")
-    estimate, matched = associate(result.estimate, truth, config.evaluation.max_time_difference)
-    odometry, _ = associate(result.odometry, truth, config.evaluation.max_time_difference)
-    corrected = trajectory_metrics(estimate, matched, config.evaluation)
-    raw = trajectory_metrics(odometry, matched, config.evaluation)
     closures = result.session_closures()
     verdicts = closure_verdicts(closures, truth, config.evaluation) if closures else np.zeros(0, dtype=bool)
-    step = max(1, int(np.ceil(len(matched) / POINTS)))
-    aligned_estimate, transform = align(estimate, matched, "se3")
-    aligned_odometry, _ = align(odometry, matched, "se3")
+    step = max(1, int(np.ceil(len(truth) / POINTS)))
+    alignment = config.evaluation.alignment  # as the ATE aligns
+    aligned_estimate, transform = align(result.estimate, truth, alignment)
+    aligned_odometry, _ = align(result.odometry, truth, alignment)
     objects = sorted(result.objects, key=lambda o: (-o.observations, o.id))[:MAX_OBJECTS]
     # The map's objects and closures are in the estimate's frame: moved as the estimate is onto the truth.
     placed = transform.apply_to_points(np.array([o.position for o in objects]).reshape(-1, 3))
     query = np.array([c.query_frame for c in closures], dtype=int)
-    closure_positions = transform.apply_to_points(result.estimate.positions[query].reshape(-1, 3))[:, :2]
+    closure_positions = aligned_estimate.positions[query, :2]
     return {
         "drive": name,
         "kind": kind,
-        "frames": len(matched),
+        "frames": len(truth),
         "route_m": round(float(truth.path_length()), 1),
-        "ate_odometry_m": raw["ate_rmse_m"],
-        "ate_m": corrected["ate_rmse_m"],
+        "ate_odometry_m": metrics["ate_rmse_m"]["odometry"],
+        "ate_m": metrics["ate_rmse_m"]["corrected"],
         "closures": len(closures),
         "false_closures": int(np.count_nonzero(~verdicts)),
         "objects": len(result.objects),
         "paths": {
-            "truth": _path(matched, step),
+            "truth": _path(truth, step),
             "odometry": _path(aligned_odometry, step),
             "corrected": _path(aligned_estimate, step),
         },
