@@ -137,9 +137,11 @@ class NavigationConfig(Section):
         ge=0,
         le=100,
         description="guidance to an object: an observation is a sighting of the goal only when it lies nearer to the "
-        "goal than to any other object of its class in the map by this many stds of its depth (the object map's: "
-        "object_map.depth_sigma_at_1m times depth squared, or the front end's own when larger): a far view of a car "
-        "beside a goal that left, metres off along its ray, could be either and sights neither",
+        "goal than to any other object of its class in the map by this many stds of its place: its depth's (the "
+        "object map's: object_map.depth_sigma_at_1m times depth squared, or the front end's own when larger) and "
+        "the goal's own in the map (one over the root of its observations' summed weights) together: a far view of "
+        "a car beside a goal that left, metres off along its ray, could be either and sights neither; so could a "
+        "near one beside a goal the map placed from a few far views",
     )
     sightings: int = Field(
         2,
@@ -170,6 +172,15 @@ class NavigationConfig(Section):
         le=100,
         description="guidance to an object: the map's other objects of the goal's class within this many "
         "confirm_radius of it compete for an observation: one nearer to them than to the goal is theirs",
+    )
+    copy_gap: int = Field(
+        2,
+        ge=0,
+        le=1_000_000,
+        description="guidance to an object: a rival (see rivals_within) that no experience within this many "
+        "experience ids of one that saw the goal ever saw is taken for a copy of the goal (one car placed twice by "
+        "two passes that disagreed by more than the object map's association radius), not a rival: an observation "
+        "between the two is the goal's. Two cars side by side are seen on one pass; 0: no copies",
     )
 
     @model_validator(mode="after")

@@ -12,8 +12,9 @@ farther than `off_route_distance` from it, when its pose jumped by more than `ju
 frame (it was relocalised, or the map was corrected), or when it comes back localised off the route; never on other
 frames. A route planned again starts with the straight way from where the robot is to the route's first experience,
 so a robot off the map is planned for again only once it has gone another `off_route_distance` astray. A point goal
-off the route's last experience, within `goal_radius` of it, is followed on to in a straight last leg: the point is
-then the route's end. The robot has arrived once it has reached the route's end within `arrival_radius` of it: its
+off the route's last experience, within `goal_radius` of it, is followed on to in a straight last leg, and so is the
+street point beside an object goal (on a link of the route's last experience): that point is then the route's end.
+The robot has arrived once it has reached the route's end within `arrival_radius` of it: its
 projection is within `end_reached` of the end, or within `arrival_radius` of it with the end abeam or behind the robot
 (a pose estimate beside the route passes the end without its projection reaching it). A robot that stops when told
 it arrived stops there, not on the rim of the radius as it comes near; the radius is how far beside the end it may
@@ -113,12 +114,18 @@ class Guide:
     def _finish_of(self, route: Route) -> np.ndarray | None:
         """A point goal's own position, when it lies off the route's last experience within `goal_radius` of it:
         the route goes on to it (the experience may be half the spacing of experiences away, or past it). An object
-        is beside the street, not on it: the route ends at the experience it is reached from."""
+        is beside the street, not on it: the route goes on to the street point beside it (`ResolvedGoal.position`,
+        on a link of its last experience)."""
         goal = route.goal
-        gap = goal.offset_m if goal.kind == "point" else 0.0
+        if goal.kind == "object":
+            finish = np.asarray(goal.position, dtype=float)
+            gap = float(np.hypot(*(finish[:2] - np.asarray(route.positions[-1, :2], dtype=float))))
+        else:
+            finish = np.asarray(goal.target, dtype=float)
+            gap = goal.offset_m if goal.kind == "point" else 0.0
         if gap <= _JOINED_M or gap > self.config.goal_radius:
             return None
-        return np.asarray(goal.target, dtype=float)
+        return finish
 
     @property
     def _goal(self) -> np.ndarray:

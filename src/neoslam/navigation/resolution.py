@@ -3,7 +3,9 @@
 An experience, a keyframe's experience and a session's start are experiences of the map: the route ends there. A
 point or an object is a target off the links: the route ends at an experience within `navigation.goal_radius` of
 it, the one nearest to it unless another saves a long detour (route plus LEG_WEIGHT times the straight distance,
-least), or at its nearest experience when none is that close. An object query ranks every object that passes its
+least), or at its nearest experience when none is that close; a route to an object goes on from there along a link to
+the point of the street beside it (experiences are metres apart: the robot stops beside the object, not at the
+experience before it). An object query ranks every object that passes its
 filters by route plus straight distance to it and takes the nearest (ties: the lowest id); `the CLASS` takes the
 only one. Stale objects (see staleness) are left out unless the goal or the caller allows them. The experiences
 near every object are found once per map (one KD-tree query), so a query over thousands of objects costs a few
@@ -40,8 +42,9 @@ LEG_WEIGHT = 10.0
 
 @dataclass(frozen=True)
 class ResolvedGoal:
-    """A goal as the map resolved it. `position` is where the route ends (its last experience's corrected
-    position; guidance goes on from it to a point goal's target within goal_radius of it); `target` what the goal
+    """A goal as the map resolved it. `position` is where the route ends: its last experience's corrected position,
+    or for an object the point of that experience's links nearest to it (the street beside it; guidance goes on along
+    the link to it, and from the experience to a point goal's target within goal_radius of it); `target` what the goal
     stands for (the object, the point, or the experience itself)."""
 
     kind: GoalKind
@@ -118,9 +121,22 @@ class MapGoals:
         experience, description, ids = self._experience_of(goal)
         return self._resolved(_kind(goal), text, description, ids, experience, self.graph.positions[experience])
 
-    def _resolved(self, kind, text, description, ids, experience, target, found=None) -> ResolvedGoal:
-        position = self.graph.positions[experience].copy()
+    def _resolved(self, kind, text, description, ids, experience, target, found=None, position=None) -> ResolvedGoal:
+        position = self.graph.positions[experience].copy() if position is None else position
         return ResolvedGoal(kind, text, description, ids, int(experience), position, np.asarray(target), found)
+
+    def _beside(self, experience: int, target: np.ndarray) -> np.ndarray:
+        """The point of the links from `experience` nearest to `target` in the ground plane (the experience itself
+        when no link passes nearer): where the street passes an object, which experiences metres apart straddle."""
+        graph = self.graph
+        pairs = graph.pairs
+        ends = np.concatenate([pairs[pairs[:, 0] == experience, 1], pairs[pairs[:, 1] == experience, 0]])
+        start = graph.positions[experience]
+        steps = graph.positions[ends] - start
+        squared = np.einsum("ij,ij->i", steps[:, :2], steps[:, :2])
+        t = np.clip((target[:2] - start[:2]) @ steps[:, :2].T / np.maximum(squared, np.finfo(float).tiny), 0.0, 1.0)
+        points = np.vstack([start, start + t[:, None] * steps])
+        return points[int(np.argmin(np.hypot(*(points[:, :2] - target[:2]).T)))].copy()
 
     def _experience_of(self, goal: Goal) -> tuple[int, str, tuple[int, ...]]:
         """An experience goal, a keyframe's experience or a session's start: (experience, description, ids)."""
@@ -209,7 +225,9 @@ class MapGoals:
             reach = self._objects_reach().of(chosen)
         experience = self._stop(reach, paths, text)[0]
         seen = f"seen {found.observations} times, last {found.last_seen()}" + (", stale" if found.stale else "")
-        return self._resolved("object", text, f"{what} ({seen})", (found.id,), experience, found.position, found)
+        beside = self._beside(experience, found.position)
+        ids = (found.id,)
+        return self._resolved("object", text, f"{what} ({seen})", ids, experience, found.position, found, beside)
 
     def _objects_reach(self) -> _Reach:
         if self._object_reach is None:

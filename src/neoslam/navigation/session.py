@@ -8,20 +8,22 @@ so (`not_localised`). Once it is, the route is planned from where the robot is (
 guidance). A goal that cannot be planned (unknown, stale, ambiguous, out of reach) makes every later frame
 `unreachable`, with the reason.
 
-An object goal must be seen to be reached: a parked car may have left since the map was made, and the map cannot
-know it until the robot looks. Every frame's observations of the goal's class are placed in the map (the robot's
-pose there, each moved from the surface the camera sees to the object's middle as the map's objects are); one within
-`navigation.confirm_radius` of the goal object, and nearer to it than to any other object of its class in the map
-by `navigation.sighting_margin` of its depth's std (a far view, metres off along its ray, of a car beside a goal
-that left must not land on the goal; a car seen only from far, behind a row of others, must still be seen), is a
-sighting. `navigation.sightings` frames with one see the goal object (a single far observation of a neighbour
-can land on it: stereo depth is metres off at 50 m); so does the map's own record, when the route is planned, that
-this session observed the goal object (before it relocalised, say: the car it has just passed, which a route of a
-few metres reaches before the camera sees it again); so do the last `navigation.recall_frames` frames before the
-session relocalised, placed in the map by the odometry from them once it has. A robot that reaches an object goal
-this session has not seen is asked to look at it (`looking`: the bearing and distance are to the object, for a
-robot to turn to it) for up to `navigation.look_time` seconds: the object seen then, it has `arrived`; not seen, it
-is `missing` (the car has left).
+An object goal must be seen to be reached: a parked car may have left since the map was made, and the map cannot know
+it until the robot looks. Every frame's observations of the goal's class are placed in the map (the robot's pose
+there, each moved from the surface the camera sees to the object's middle as the map's objects are); one within
+`navigation.confirm_radius` of the goal object, and nearer to it than to any other object of its class in the map by
+`navigation.sighting_margin` of its depth's std (a far view, metres off along its ray, of a car beside a goal that
+left must not land on the goal; a car seen only from far, behind a row of others, must still be seen; the margin grows
+with the goal's own std in the map, which a few far views place metres off), is a sighting. A neighbour that no
+stretch of experiences around the goal's ever saw is taken for a copy of it (`navigation.copy_gap`: one car two passes
+placed metres apart), not a rival. `navigation.sightings` frames with one see the goal object (a single far
+observation of a neighbour can land on it: stereo depth is metres off at 50 m); so does the map's own record, when the
+route is planned, that this session observed the goal object (before it relocalised, say: the car it has just passed,
+which a route of a few metres reaches before the camera sees it again); so do the last `navigation.recall_frames`
+frames before the session relocalised, placed in the map by the odometry from them once it has. A robot that reaches
+an object goal this session has not seen is asked to look at it (`looking`: the bearing and distance are to the
+object, for a robot to turn to it) for up to `navigation.look_time` seconds: the object seen then, it has `arrived`;
+not seen, it is `missing` (the car has left).
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ from neoslam.mapping.object_map import depth_sigmas
 from neoslam.navigation.goals import Goal, ObjectQuery, parse_goal
 from neoslam.navigation.guidance import Guidance, Guide
 from neoslam.navigation.route import Route, RoutePlanner
+from neoslam.navigation.staleness import MapObjects
 from neoslam.navigation.view import pose_in_map
 from neoslam.pipeline import NeoSLAM
 from neoslam.types import Frame
@@ -149,6 +152,7 @@ class GoalGuidance:
         self._guide: Guide | None = None
         self._sightings = 0  # frames since the route was planned that saw the goal object
         self._rivals = np.zeros((0, 2))  # the map's other objects of the goal's class near it (ground plane)
+        self._goal_sigma = 0.0  # the std of the goal object's position in the map, m
         self._recalled: deque[_Recalled] = deque(maxlen=config.navigation.recall_frames)  # before relocalising
 
     @property
@@ -233,7 +237,8 @@ class GoalGuidance:
             return False
         self._guide = Guide(route, self.config.navigation, replan=self._planner.replan)
         found = route.goal.object
-        self._rivals = self._rivals_of(route) if found is not None else np.zeros((0, 2))
+        if found is not None:
+            self._rivals, self._goal_sigma = self._rivals_of(route)
         if found is not None and slam.session.id in found.sessions:  # the map's record: this session saw it
             self._sightings = self.config.navigation.sightings
         self._sightings += self._recall(frame, pose)
@@ -245,16 +250,31 @@ class GoalGuidance:
         route = self.route
         return route is not None and route.goal.kind == "object"
 
-    def _rivals_of(self, route: Route) -> np.ndarray:
+    def _rivals_of(self, route: Route) -> tuple[np.ndarray, float]:
         """(k, 2) the positions of the map's other objects of the goal object's class within `rivals_within`
-        confirm radii of it."""
+        confirm radii of it, but for its copies (`copy_gap`), and the std of the goal's own position."""
         assert self._planner is not None and route.goal.object is not None
         found, objects = route.goal.object, self._planner.objects()
-        others = (objects.labels == found.label) & (objects.ids != found.id)
-        positions = objects.positions[others, :2]
+        goal_row = objects.row(found.id)
+        assert goal_row is not None
         navigation = self.config.navigation
-        near = np.hypot(*(positions - found.position[:2]).T) <= navigation.rivals_within * navigation.confirm_radius
-        return positions[near]
+        others = np.flatnonzero((objects.labels == found.label) & (objects.ids != found.id))
+        near = np.hypot(*(objects.positions[others, :2] - found.position[:2]).T)
+        others = others[near <= navigation.rivals_within * navigation.confirm_radius]
+        rivals = [row for row in others if not self._copies(objects, goal_row, row)]
+        return objects.positions[rivals, :2].reshape(-1, 2), float(objects.sigmas[goal_row])
+
+    def _copies(self, objects: MapObjects, goal_row: int, row: int) -> bool:
+        """Whether the object of `row` is a copy of the goal's: no experience within copy_gap ids of one that saw
+        the goal saw it. Two cars side by side are seen from the same stretch of a pass; one car that two passes
+        placed metres apart is seen by each pass as one of the two."""
+        gap = self.config.navigation.copy_gap
+        mine, theirs = objects.experiences_of(goal_row), objects.experiences_of(row)
+        if gap == 0 or len(mine) == 0 or len(theirs) == 0:
+            return False
+        at = np.searchsorted(mine, theirs)
+        before, after = mine[np.maximum(at - 1, 0)], mine[np.minimum(at, len(mine) - 1)]
+        return bool(np.minimum(np.abs(theirs - before), np.abs(theirs - after)).min() > gap)
 
     def _remember(self, frame: Frame) -> None:
         """Keep a frame's observations from before the session relocalised (the last `recall_frames`)."""
@@ -293,5 +313,6 @@ class GoalGuidance:
         if len(self._rivals):
             theirs = np.linalg.norm(in_map[:, None, :2] - self._rivals[None], axis=2).min(axis=1)
         navigation = self.config.navigation
-        clear = gaps + navigation.sighting_margin * seen.sigmas[mine] < theirs
+        spread = np.hypot(seen.sigmas[mine], self._goal_sigma)  # the observation's and the goal's own
+        clear = gaps + navigation.sighting_margin * spread < theirs
         return bool(((gaps <= navigation.confirm_radius) & clear).any())

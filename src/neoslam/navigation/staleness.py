@@ -65,6 +65,7 @@ class MapObjects:
     labels: np.ndarray  # (k,) str, as the map has them
     keys: np.ndarray  # (k,) str, the labels in lower case (what a query names)
     positions: np.ndarray  # (k, 3)
+    sigmas: np.ndarray  # (k,) each position's std, m: one over the root of its observations' summed weights
     observations: np.ndarray  # (k,)
     last_experience: np.ndarray  # (k,)
     last_session: np.ndarray  # (k,)
@@ -72,6 +73,7 @@ class MapObjects:
     misses: np.ndarray  # (k,)
     stale: np.ndarray  # (k,) bool
     seen: np.ndarray  # (m, 2) rows and the sessions that saw them, each pair once, sorted
+    sighted: np.ndarray  # (p, 2) rows and the experiences that saw them, each pair once, sorted
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -86,6 +88,11 @@ class MapObjects:
         mask = np.zeros(len(self), dtype=bool)
         mask[self.seen[self.seen[:, 1] == session, 0]] = True
         return mask
+
+    def experiences_of(self, row: int) -> np.ndarray:
+        """The experiences that saw the object of a row, increasing."""
+        low, high = np.searchsorted(self.sighted[:, 0], [row, row + 1])
+        return self.sighted[low:high, 1]
 
     def status(self, row: int) -> ObjectStatus:
         sessions = frozenset(int(s) for s in self.seen[self.seen[:, 0] == row, 1])
@@ -122,18 +129,21 @@ def map_objects(view: MapView, graph: NavigationGraph, config: NavigationConfig,
     rows = np.full(n, -1)
     rows[ids] = np.arange(len(ids))
     labels = np.asarray(objects.labels, dtype=object)[ids] if n else np.zeros(0, dtype=object)
+    weights = np.asarray(objects.weights[:n], dtype=float)[ids]
     return MapObjects(
         ids=ids,
         labels=labels,
         keys=np.char.lower(labels.astype(str)) if len(labels) else np.zeros(0, dtype=str),
         positions=positions[ids],
+        sigmas=1.0 / np.sqrt(np.maximum(weights, np.finfo(float).tiny)),
         observations=counts[ids],
         last_experience=last[ids],
         last_session=graph.sessions[last[ids]],
         last_frame=graph.frames[last[ids]],
         misses=misses,
         stale=misses >= config.stale_after_misses,
-        seen=_sessions_seen(rows[pair_object], graph.sessions[pair_experience]),
+        seen=_pairs(rows[pair_object], graph.sessions[pair_experience]),
+        sighted=_pairs(rows[pair_object], pair_experience),
     )
 
 
@@ -144,11 +154,11 @@ def object_statuses(
     return map_objects(view, graph, config, min_observations).statuses()
 
 
-def _sessions_seen(rows: np.ndarray, sessions: np.ndarray) -> np.ndarray:
-    """(m, 2) each (row, session) pair once, sorted; observations of objects left out (row -1) dropped."""
+def _pairs(rows: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """(m, 2) each (row, value) pair once, sorted; observations of objects left out (row -1) dropped."""
     kept = rows >= 0
-    span = int(sessions.max(initial=0)) + 1
-    keys = np.unique(rows[kept] * span + sessions[kept])
+    span = int(values.max(initial=0)) + 1
+    keys = np.unique(rows[kept] * span + values[kept])
     return np.column_stack([keys // span, keys % span]).astype(int).reshape(-1, 2)
 
 
