@@ -76,9 +76,12 @@ class MapBuilder:
         positions = np.array([p[:2, 3] for p in self.poses])
         return int(np.argmin(np.linalg.norm(positions - (x, y), axis=1)))
 
-    def add_object(self, label: str, position: tuple[float, float, float], seen_from: dict[int, int]) -> int:
-        """An object at `position`, observed `count` times from each experience of `seen_from` {experience: count}."""
-        self.objects.append((label, np.asarray(position, dtype=float), dict(seen_from)))
+    def add_object(
+        self, label: str, position: tuple[float, float, float], seen_from: dict[int, int], sigma: float = 1.0
+    ) -> int:
+        """An object at `position`, observed `count` times from each experience of `seen_from` {experience: count},
+        each observation's std `sigma` (m; its weight in the map is one over its square)."""
+        self.objects.append((label, np.asarray(position, dtype=float), dict(seen_from), sigma))
         return len(self.objects) - 1
 
     def state(self) -> MapState:
@@ -111,18 +114,19 @@ class MapBuilder:
     def _object_state(self, poses: np.ndarray) -> ObjectMapState:
         labels, sums, weights, counts = [], [], [], []
         pair_object, pair_experience, pair_sums, pair_weights, pair_counts = [], [], [], [], []
-        for index, (label, position, seen_from) in enumerate(self.objects):
+        for index, (label, position, seen_from, sigma) in enumerate(self.objects):
             labels.append(label)
             total = sum(seen_from.values())
-            sums.append(total * position)
-            weights.append(float(total))
+            weight = 1.0 / sigma**2
+            sums.append(total * weight * position)
+            weights.append(total * weight)
             counts.append(total)
             for experience, count in sorted(seen_from.items()):
                 local = invert_pose(poses[experience]) @ np.append(position, 1.0)
                 pair_object.append(index)
                 pair_experience.append(experience)
-                pair_sums.append(count * local[:3])
-                pair_weights.append(float(count))
+                pair_sums.append(count * weight * local[:3])
+                pair_weights.append(count * weight)
                 pair_counts.append(count)
         return ObjectMapState(
             labels=labels,

@@ -174,3 +174,48 @@ def test_a_far_observation_that_could_be_a_neighbours_is_no_sighting():
         for index in range(5, 5 + needed):
             guidance(state, _frame(index, robot, (("car", (58.5, -5.0)),)), robot)
         assert guidance.latest is not None and guidance.summary()["goal_seen"] is expected
+
+
+def test_a_goal_the_map_placed_from_few_far_views_needs_a_clearer_sighting():
+    """A car 3 m from the goal car; an observation 0.9 m from the goal's map position and 2.1 m from the other car
+    sights the goal when the map knows where the goal is to a decimetre (five views, each 0.3 m off), but not when
+    it placed the goal from five far views each 3 m off: the goal may then stand metres from its map position, and
+    the observation could be the other car's."""
+    needed = NeoSLAMConfig().navigation.sightings
+    for sigma, expected in ((0.3, True), (3.0, False)):
+        streets = ladder()
+        seen_from = {streets.at(60, 0): 3, streets.at(55, 0): 2}
+        goal = streets.builder.add_object("car", (60, -5, 0.5), seen_from, sigma=sigma)
+        streets.builder.add_object("car", (60, -8, 0.5), seen_from)
+        state = _running(streets.builder.state())
+        robot = _turned_right(state.experience_poses[streets.at(60, 0)])
+        offset = _middle_offset(state, robot)
+        guidance = GoalGuidance(f"object {goal}", NeoSLAMConfig())
+        for index in range(5, 5 + needed):
+            guidance(state, _frame(index, robot, (("car", (60.0, -5.9 + offset)),)), robot)
+        assert guidance.summary()["goal_seen"] is expected
+
+
+def test_a_car_only_another_pass_saw_beside_the_goal_is_a_copy_of_it():
+    """The map holds one car twice, 3 m apart: the goal as the first pass along the street placed it, a copy as a
+    second pass (experiences made much later) did. An observation between the two sights the goal. A car as near
+    that the goal's own experiences saw is a neighbour, and the same observation sights neither; with copy_gap 0 no
+    car is a copy."""
+    needed = NeoSLAMConfig().navigation.sightings
+    cases = (("later pass", NeoSLAMConfig(), True), ("same pass", NeoSLAMConfig(), False))
+    cases += (("later pass", NeoSLAMConfig.model_validate({"navigation": {"copy_gap": 0}}), False),)
+    for seen_by, config, expected in cases:
+        streets = ladder()
+        builder = streets.builder
+        goal = builder.add_object("car", (60, -5, 0.5), {streets.at(60, 0): 3, streets.at(55, 0): 2})
+        again = builder.drive([(50, 1), (70, 1)], after=None)  # the street driven again, much later
+        builder.link(again[0], streets.at(50, 0))
+        other = {again[2]: 3, again[1]: 2} if seen_by == "later pass" else {streets.at(60, 0): 3}
+        builder.add_object("car", (60, -8, 0.5), other)
+        state = _running(builder.state())
+        robot = _turned_right(state.experience_poses[streets.at(60, 0)])
+        offset = _middle_offset(state, robot)
+        guidance = GoalGuidance(f"object {goal}", config)
+        for index in range(5, 5 + needed):
+            guidance(state, _frame(index, robot, (("car", (60.0, -6.5 + offset)),)), robot)
+        assert guidance.summary()["goal_seen"] is expected, seen_by

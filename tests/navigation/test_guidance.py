@@ -219,3 +219,19 @@ def test_a_route_that_turns_back_on_itself_is_followed_from_the_waypoint_the_rob
     assert back[-1].waypoint > points.index((0.5, 5)) and abs(back[-1].bearing_rad) < np.radians(120)
     east = [guide.update(pose_at(x, 2.0, 0.0)) for x in np.arange(0.0, 15.01, 0.5)]
     assert east[-1].state == "arrived"
+
+
+def test_a_robot_going_to_an_object_between_experiences_arrives_beside_it():
+    """The route to a car beside the middle of two experiences 5 m apart ends at the street point beside it: the
+    robot at the experience before it has not arrived (the end is 2.5 m ahead); at the point beside the car it has."""
+    streets = ladder()
+    car = streets.builder.add_object("car", (62.5, -5, 0.5), {streets.at(60, 0): 3, streets.at(65, 0): 2})
+    planner = RoutePlanner(streets.state)
+    route = planner.plan(f"object {car}", start=streets.at(20, 0))
+    guide = Guide(route, CONFIG, planner.replan)
+    records = [guide.update(pose) for pose in _drive(route)]
+    at_experience = guide.update(pose_at(60.0, 0.0, 0.0))
+    assert not at_experience.arrived and at_experience.remaining_m == pytest.approx(2.5, abs=0.01)
+    assert not any(r.arrived for r in records)
+    beside = guide.update(pose_at(62.5, 0.0, 0.0))
+    assert beside.arrived and beside.remaining_m == pytest.approx(0.0, abs=0.01)

@@ -129,3 +129,22 @@ def test_a_start_can_be_any_place_that_names_one(streets):
     assert planner.start_of("keyframe 7") == streets.at(60, 0)
     with pytest.raises(GoalError, match="start 'nearest truck': 2 objects match"):
         planner.start_of("truck")
+
+
+def test_a_route_to_an_object_ends_on_the_street_beside_it(streets):
+    """Experiences are 5 m apart: an object beside the middle of two ends the route at the street point beside it,
+    on the link between them, whichever way the robot comes: the route is planned to the experience it reaches first
+    and goes on along the link, its length to that point (an object abeam of an experience ends there)."""
+    builder = streets.builder
+    between = builder.add_object("car", (62.5, -5, 0.5), {streets.at(60, 0): 3, streets.at(65, 0): 2})
+    route = plan_route(streets.state, f"object {between}", start=streets.at(20, 0))
+    goal = route.goal
+    assert goal.experience == streets.at(60, 0)
+    np.testing.assert_allclose(goal.position[:2], [62.5, 0.0], atol=1e-9)
+    assert goal.offset_m == pytest.approx(5.0)
+    assert route.length_m == pytest.approx(route.along_m[-1] + 2.5)
+    east = plan_route(streets.state, f"object {between}", start=streets.at(150, 0))  # the other way: from 65
+    assert east.goal.experience == streets.at(65, 0) and east.length_m == pytest.approx(east.along_m[-1] + 2.5)
+    np.testing.assert_allclose(east.goal.position[:2], [62.5, 0.0], atol=1e-9)
+    abeam = plan_route(streets.state, "object 3", start=streets.at(20, 0)).goal  # the car at (120, -5)
+    np.testing.assert_allclose(abeam.position, streets.state.experience_poses[abeam.experience, :3, 3])

@@ -2,23 +2,23 @@
 is left, whether the robot has arrived, and a new route when it left this one or was relocalised elsewhere
 (OpenRatSLAM's range and bearing to the next sub-goal). Pure logic: poses in, records out, no I/O.
 
-Each frame the robot's position is projected onto the route's segments in the ground plane, searched only near
-where it was (from the segment before the last one to `jump_distance + off_route_distance + look_ahead` metres
-ahead), so a frame costs the same on a route of 10 or 10,000 waypoints. The next waypoint is the first route
-experience at least `look_ahead` metres ahead of that projection along the route; waypoints only advance, and a robot
-within `waypoint_reached` of its next waypoint (not the end) has reached it (the projection moves on to it). The
-route is planned again to the same goal (RoutePlanner.replan: from where the robot joins the map) when the robot is
-farther than `off_route_distance` from it, when its pose jumped by more than `jump_distance` since the previous
-frame (it was relocalised, or the map was corrected), or when it comes back localised off the route; never on other
-frames. A route planned again starts with the straight way from where the robot is to the route's first experience,
-so a robot off the map is planned for again only once it has gone another `off_route_distance` astray. A point goal
-off the route's last experience, within `goal_radius` of it, is followed on to in a straight last leg, and so is the
-street point beside an object goal (on a link of the route's last experience): that point is then the route's end.
-The robot has arrived once it has reached the route's end within `arrival_radius` of it: its
-projection is within `end_reached` of the end, or within `arrival_radius` of it with the end abeam or behind the robot
-(a pose estimate beside the route passes the end without its projection reaching it). A robot that stops when told
-it arrived stops there, not on the rim of the radius as it comes near; the radius is how far beside the end it may
-be (a pose estimate off the route, a goal off the links). It stays arrived until `follow` gives it a new route.
+Each frame the robot's position is projected onto the route's segments in the ground plane, searched only near where
+it was (from the segment before the last one to `jump_distance + off_route_distance + look_ahead` metres ahead), so a
+frame costs the same on a route of 10 or 10,000 waypoints. The next waypoint is the first route experience at least
+`look_ahead` metres ahead of that projection along the route; waypoints only advance, and a robot within
+`waypoint_reached` of its next waypoint (not the end) has reached it (the projection moves on to it). The route is
+planned again to the same goal (RoutePlanner.replan: from where the robot joins the map) when the robot is farther
+than `off_route_distance` from it, when its pose jumped by more than `jump_distance` since the previous frame (it was
+relocalised, or the map was corrected), or when it comes back localised off the route; never on other frames. A route
+planned again starts with the straight way from where the robot is to the route's first experience, so a robot off the
+map is planned for again only once it has gone another `off_route_distance` astray. A point goal off the route's last
+experience, within `goal_radius` of it, is followed on to in a straight last leg, and so is the street point beside an
+object goal (on a link of the route's last experience): that point is then the route's end. The robot has arrived once
+it has reached the route's end within `arrival_radius` of it: its projection is within `end_reached` of the end, or
+within `arrival_radius` of it with the end abeam or behind the robot (a pose estimate beside the route passes the end
+without its projection reaching it). A robot that stops when told it arrived stops there, not on the rim of the radius
+as it comes near; the radius is how far beside the end it may be (a pose estimate off the route, a goal off the
+links). It stays arrived until `follow` gives it a new route.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ import numpy as np
 from neoslam.config import NavigationConfig
 from neoslam.errors import GoalError
 from neoslam.navigation.resolution import ResolvedGoal
-from neoslam.navigation.route import Route
+from neoslam.navigation.route import Route, leg_to, route_finish
 
 __all__ = ["Guidance", "GuidanceState", "Guide", "Replan"]
 
@@ -94,9 +94,9 @@ class Guide:
         points = np.asarray(route.positions, dtype=float)
         along = np.asarray(route.along_m, dtype=float)
         index = np.arange(len(route))  # each internal point's waypoint in the route; -1: none (a point of its own)
-        finish = self._finish_of(route)
+        finish = route_finish(route.goal, points[-1], self.config)
         if finish is not None:
-            points, along, index = _leg_to(finish, points, along, index, self.config.goal_radius)
+            points, along, index = leg_to(finish, points, along, index, self.config.goal_radius)
         self._offset = 0  # internal points before the route's first waypoint
         if origin is not None and np.hypot(*(points[0, :2] - origin[:2])) > _JOINED_M:
             approach = float(np.hypot(*(points[0, :2] - origin[:2])))
@@ -110,22 +110,6 @@ class Guide:
         self._previous: np.ndarray | None = None  # the last localised position (ground plane)
         self._arrived = False
         self._failed_at: np.ndarray | None = None  # where the last re-plan found no route
-
-    def _finish_of(self, route: Route) -> np.ndarray | None:
-        """A point goal's own position, when it lies off the route's last experience within `goal_radius` of it:
-        the route goes on to it (the experience may be half the spacing of experiences away, or past it). An object
-        is beside the street, not on it: the route goes on to the street point beside it (`ResolvedGoal.position`,
-        on a link of its last experience)."""
-        goal = route.goal
-        if goal.kind == "object":
-            finish = np.asarray(goal.position, dtype=float)
-            gap = float(np.hypot(*(finish[:2] - np.asarray(route.positions[-1, :2], dtype=float))))
-        else:
-            finish = np.asarray(goal.target, dtype=float)
-            gap = goal.offset_m if goal.kind == "point" else 0.0
-        if gap <= _JOINED_M or gap > self.config.goal_radius:
-            return None
-        return finish
 
     @property
     def _goal(self) -> np.ndarray:
@@ -241,27 +225,3 @@ class Guide:
             arrived=self._arrived,
             reason=reason,
         )
-
-
-def _leg_to(
-    finish: np.ndarray, points: np.ndarray, along: np.ndarray, index: np.ndarray, within: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The route's points (n, 3), distances along it and waypoint indices, cut where its last `within` metres pass
-    nearest to `finish` and going on from there straight to it: a route that passes beside a point goal to end at
-    an experience beyond it does not drive past the point and back."""
-    cut, at, along_at, gap = len(points) - 1, points[-1], float(along[-1]), np.inf
-    first = max(int(np.searchsorted(along, along[-1] - within, side="left")) - 1, 0)
-    for k in range(first, len(points) - 1):  # a few segments: experiences are metres apart
-        step = points[k + 1] - points[k]
-        squared = float(step[:2] @ step[:2])
-        t = float(np.clip((finish[:2] - points[k, :2]) @ step[:2] / max(squared, _TINY), 0.0, 1.0))
-        here = points[k] + t * step
-        distance = float(np.hypot(*(here[:2] - finish[:2])))
-        if distance <= gap:  # the later of equals: the route's end when it is as near
-            cut, at, along_at, gap = k, here, float(along[k] + t * (along[k + 1] - along[k])), distance
-    kept = slice(0, cut + 1)
-    points, along, index = points[kept], along[kept], index[kept]
-    if np.hypot(*(at[:2] - points[-1, :2])) > _JOINED_M:  # cut inside a segment: its own point
-        points, along, index = np.concatenate([points, at[None]]), np.append(along, along_at), np.append(index, -1)
-    leg = float(np.hypot(*(finish[:2] - points[-1, :2])))
-    return np.concatenate([points, finish[None, :3]]), np.append(along, along[-1] + leg), np.append(index, -1)

@@ -1,15 +1,15 @@
 """Goals resolved against a map: which experience a route ends at, and what position the goal stands for.
 
-An experience, a keyframe's experience and a session's start are experiences of the map: the route ends there. A
-point or an object is a target off the links: the route ends at an experience within `navigation.goal_radius` of
-it, the one nearest to it unless another saves a long detour (route plus LEG_WEIGHT times the straight distance,
-least), or at its nearest experience when none is that close; a route to an object goes on from there along a link to
-the point of the street beside it (experiences are metres apart: the robot stops beside the object, not at the
-experience before it). An object query ranks every object that passes its
-filters by route plus straight distance to it and takes the nearest (ties: the lowest id); `the CLASS` takes the
-only one. Stale objects (see staleness) are left out unless the goal or the caller allows them. The experiences
-near every object are found once per map (one KD-tree query), so a query over thousands of objects costs a few
-array operations after Dijkstra.
+An experience, a keyframe's experience and a session's start are experiences of the map: the route ends there. A point
+or an object is a target off the links: the route ends at an experience within `navigation.goal_radius` of it, the one
+nearest to it unless another saves a long detour (route plus LEG_WEIGHT times the straight distance, least), or at its
+nearest experience when none is that close. A route to an object ends at the point of the street beside it, on a link
+of that experience (experiences are metres apart: the robot stops beside the object, not at the experience before or
+after it): it is planned to the link's end it reaches first, and goes on along the link.
+An object query ranks every object that passes its filters by route plus straight distance to it and takes the nearest
+(ties: the lowest id); `the CLASS` takes the only one. Stale objects (see staleness) are left out unless the goal or
+the caller allows them. The experiences near every object are found once per map (one KD-tree query), so a query over
+thousands of objects costs a few array operations after Dijkstra.
 
 Every refusal is one GoalError naming the goal and the problem: an unknown id, a class the map does not hold, an
 ambiguous `the`, only stale candidates, a point off the map; NoRouteError when no route reaches it.
@@ -30,7 +30,7 @@ from neoslam.navigation.graph import NavigationGraph, ShortestPaths
 from neoslam.navigation.staleness import MapObjects, ObjectStatus
 from neoslam.navigation.view import MapView
 
-__all__ = ["LEG_WEIGHT", "GoalKind", "MapGoals", "ResolvedGoal"]
+__all__ = ["LEG_WEIGHT", "GoalKind", "MapGoals", "ResolvedGoal", "street_beside"]
 
 GoalKind = Literal["experience", "keyframe", "point", "start", "object"]
 _LISTED = 5  # ids named in an error line at most
@@ -38,6 +38,7 @@ _LISTED = 5  # ids named in an error line at most
 # the target unless a stop a metre farther saves a detour of more than this (at 1, it would stop short, where the
 # straight line to the target cuts the corner).
 LEG_WEIGHT = 10.0
+_TINY = 1e-12  # a link shorter than this (squared, m^2) is a point
 
 
 @dataclass(frozen=True)
@@ -125,19 +126,6 @@ class MapGoals:
         position = self.graph.positions[experience].copy() if position is None else position
         return ResolvedGoal(kind, text, description, ids, int(experience), position, np.asarray(target), found)
 
-    def _beside(self, experience: int, target: np.ndarray) -> np.ndarray:
-        """The point of the links from `experience` nearest to `target` in the ground plane (the experience itself
-        when no link passes nearer): where the street passes an object, which experiences metres apart straddle."""
-        graph = self.graph
-        pairs = graph.pairs
-        ends = np.concatenate([pairs[pairs[:, 0] == experience, 1], pairs[pairs[:, 1] == experience, 0]])
-        start = graph.positions[experience]
-        steps = graph.positions[ends] - start
-        squared = np.einsum("ij,ij->i", steps[:, :2], steps[:, :2])
-        t = np.clip((target[:2] - start[:2]) @ steps[:, :2].T / np.maximum(squared, np.finfo(float).tiny), 0.0, 1.0)
-        points = np.vstack([start, start + t[:, None] * steps])
-        return points[int(np.argmin(np.hypot(*(points[:, :2] - target[:2]).T)))].copy()
-
     def _experience_of(self, goal: Goal) -> tuple[int, str, tuple[int, ...]]:
         """An experience goal, a keyframe's experience or a session's start: (experience, description, ids)."""
         text = goal.describe()
@@ -224,8 +212,10 @@ class MapGoals:
             chosen[row] = True
             reach = self._objects_reach().of(chosen)
         experience = self._stop(reach, paths, text)[0]
+        beside, other = street_beside(self.graph, experience, found.position)
+        if other >= 0 and paths.predecessors[experience] == other:
+            experience = other  # the route passes the object on its way to the stop: it ends before, and goes on
         seen = f"seen {found.observations} times, last {found.last_seen()}" + (", stale" if found.stale else "")
-        beside = self._beside(experience, found.position)
         ids = (found.id,)
         return self._resolved("object", text, f"{what} ({seen})", ids, experience, found.position, found, beside)
 
@@ -275,6 +265,21 @@ class MapGoals:
         if len(rows) > 1:
             what += f", the nearest by route of {len(rows)}"
         return self._at_object(text, found, paths, what, row)
+
+
+def street_beside(graph: NavigationGraph, experience: int, target: np.ndarray) -> tuple[np.ndarray, int]:
+    """The point of the links of `experience` nearest to `target` in the ground plane, and the experience at the
+    link's other end (the experience itself and -1 when no link passes nearer): where the street passes an object,
+    which experiences metres apart straddle."""
+    pairs = graph.pairs
+    ends = np.concatenate([pairs[pairs[:, 0] == experience, 1], pairs[pairs[:, 1] == experience, 0]])
+    start = graph.positions[experience]
+    steps = graph.positions[ends] - start
+    squared = np.einsum("ij,ij->i", steps[:, :2], steps[:, :2])
+    t = np.clip((target[:2] - start[:2]) @ steps[:, :2].T / np.maximum(squared, _TINY), 0.0, 1.0)
+    points = np.vstack([start, start + t[:, None] * steps])
+    nearest = int(np.argmin(np.hypot(*(points[:, :2] - target[:2]).T)))
+    return points[nearest].copy(), int(ends[nearest - 1]) if nearest else -1
 
 
 def _first_least(groups: np.ndarray, values: np.ndarray) -> np.ndarray:

@@ -14,26 +14,29 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from neoslam.config import NeoSLAMConfig
+from neoslam.config import NavigationConfig, NeoSLAMConfig
 from neoslam.errors import GoalError, NoRouteError
 from neoslam.navigation.goals import Goal, parse_goal
 from neoslam.navigation.graph import NavigationGraph, ShortestPaths
-from neoslam.navigation.resolution import MapGoals, ResolvedGoal
+from neoslam.navigation.resolution import MapGoals, ResolvedGoal, street_beside
 from neoslam.navigation.staleness import MapObjects, map_objects
 from neoslam.navigation.view import MapSource, MapView, map_view
 from neoslam.pipeline import NeoSLAM
 
-__all__ = ["Route", "RoutePlanner", "Start", "plan_route"]
+__all__ = ["Route", "RoutePlanner", "Start", "leg_to", "plan_route", "route_finish"]
 
 # Where a route starts: None (the robot's experience, or a stored map's last), an experience id, a goal (text or
 # typed) naming a place, or a position (3,) or pose (4, 4) in the map's frame (its nearest experience).
 Start = int | str | Goal | np.ndarray | None
+_TINY = 1e-12  # a segment shorter than this (squared, m^2) is a point
+_JOINED_M = 0.01  # points this close are one
 
 
 @dataclass(frozen=True)
 class Route:
     """A route over the experience map, start first. Poses are the experiences' corrected poses T_map_robot (map
-    frame); `along_m` the distance along the route at each of them (0 at the start, `length_m` at the end)."""
+    frame); `along_m` the distance along the route at each of them (0 at the start); `length_m` to where it ends:
+    its last experience, or the point it goes on to (an object's street point, a point goal: `route_finish`)."""
 
     experiences: np.ndarray  # (m,) int
     poses: np.ndarray  # (m, 4, 4)
@@ -169,6 +172,8 @@ class RoutePlanner:
             )
         start = int(joins[int(np.argmin(costs))])
         position_now = self.graph.positions[end].copy()
+        if goal.kind == "object":
+            position_now = street_beside(self.graph, end, goal.target)[0]
         moved = goal.target if goal.kind in ("point", "object") else position_now  # an experience moves with the map
         return self._along(paths.path(start)[::-1], dataclasses.replace(goal, position=position_now, target=moved))
 
@@ -181,12 +186,18 @@ class RoutePlanner:
         return self._along(paths.path(goal.experience), goal)
 
     def _along(self, path: np.ndarray, goal: ResolvedGoal) -> Route:
-        """The route along a path of experiences, start first."""
+        """The route along a path of experiences, start first; its length to where it ends (route_finish)."""
         steps = (path[:-1], path[1:])
         along = np.concatenate([[0.0], np.cumsum(self.graph.lengths(*steps))])
         expected = float(self.graph.times(*steps).sum()) if self.graph.known_speed(path) else None
         poses = np.array(self.view.poses[path], dtype=float)
-        return Route(path, poses, along, float(along[-1]), expected, goal, int(path[0]))
+        length = float(along[-1])
+        navigation = self.config.navigation
+        finish = route_finish(goal, poses[-1, :3, 3], navigation)
+        if finish is not None:
+            cut = leg_to(finish, poses[:, :3, 3], along, np.arange(len(path)), navigation.goal_radius)
+            length = float(cut[1][-1])
+        return Route(path, poses, along, length, expected, goal, int(path[0]))
 
     def _require_experiences(self) -> None:
         if len(self.graph) == 0:
@@ -198,3 +209,43 @@ def plan_route(
 ) -> Route:
     """The shortest route on a map (a `MapState` or a running `NeoSLAM`) from `start` to `goal`; see RoutePlanner."""
     return RoutePlanner(source, config).plan(goal, start, stale)
+
+
+def route_finish(goal: ResolvedGoal, last: np.ndarray, config: NavigationConfig) -> np.ndarray | None:
+    """Where a route goes on to from its last experience (`last`, its position), None when it ends there: the street
+    point beside an object goal (on a link of the experience), or a point goal's own position when it lies within
+    goal_radius (the experience may be half the spacing of experiences away, or past it)."""
+    if goal.kind == "object":
+        finish = np.asarray(goal.position, dtype=float)
+        gap, bound = float(np.hypot(*(finish[:2] - last[:2]))), np.inf  # on a link: the street, however long
+    elif goal.kind == "point":
+        finish, gap, bound = np.asarray(goal.target, dtype=float), goal.offset_m, config.goal_radius
+    else:
+        return None
+    return finish if _JOINED_M < gap <= bound else None
+
+
+def leg_to(
+    finish: np.ndarray, points: np.ndarray, along: np.ndarray, index: np.ndarray, within: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The route's points (n, 3), distances along it and waypoint indices (`index`, -1: a point of its own), cut
+    where its last `within` metres pass nearest to `finish` and going on from there straight to it: a route that
+    passes beside a point goal to end at an experience beyond it does not drive past the point and back."""
+    cut, at, along_at, gap = len(points) - 1, points[-1], float(along[-1]), np.inf
+    first = max(int(np.searchsorted(along, along[-1] - within, side="left")) - 1, 0)
+    for k in range(first, len(points) - 1):  # a few segments: experiences are metres apart
+        step = points[k + 1] - points[k]
+        squared = float(step[:2] @ step[:2])
+        t = float(np.clip((finish[:2] - points[k, :2]) @ step[:2] / max(squared, _TINY), 0.0, 1.0))
+        here = points[k] + t * step
+        distance = float(np.hypot(*(here[:2] - finish[:2])))
+        if distance <= gap:  # the later of equals: the route's end when it is as near
+            cut, at, along_at, gap = k, here, float(along[k] + t * (along[k + 1] - along[k])), distance
+    kept = slice(0, cut + 1)
+    points, along, index = points[kept], along[kept], index[kept]
+    if np.hypot(*(at[:2] - points[-1, :2])) > _JOINED_M:  # cut inside a segment: its own point
+        points, along, index = np.concatenate([points, at[None]]), np.append(along, along_at), np.append(index, -1)
+    leg = float(np.hypot(*(finish[:2] - points[-1, :2])))
+    if leg <= _JOINED_M:  # the route passes through it
+        return points, along, index
+    return np.concatenate([points, finish[None, :3]]), np.append(along, along[-1] + leg), np.append(index, -1)
