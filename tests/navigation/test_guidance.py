@@ -235,3 +235,9 @@ def test_a_robot_going_to_an_object_between_experiences_arrives_beside_it():
     assert not any(r.arrived for r in records)
     beside = guide.update(pose_at(62.5, 0.0, 0.0))
     assert beside.arrived and beside.remaining_m == pytest.approx(0.0, abs=0.01)
+    again = Guide(route, CONFIG, planner.replan)  # relocalised past the car, on the street beyond it
+    again.update(pose_at(20.0, 0.0, 0.0))
+    replanned = again.update(pose_at(90.0, 0.0, np.pi))
+    assert replanned.state == "replanned" and replanned.route is not None
+    np.testing.assert_allclose(replanned.route.goal.position[:2], [62.5, 0.0], atol=1e-9)
+    assert replanned.remaining_m == pytest.approx(27.5, abs=0.01)  # back along the street to the car, not past it

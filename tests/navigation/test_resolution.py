@@ -143,6 +143,8 @@ def test_a_route_to_an_object_ends_on_the_street_beside_it(streets):
     np.testing.assert_allclose(goal.position[:2], [62.5, 0.0], atol=1e-9)
     assert goal.offset_m == pytest.approx(5.0)
     assert route.length_m == pytest.approx(route.along_m[-1] + 2.5)
+    np.testing.assert_allclose(route.path[-1, :2], [62.5, 0.0], atol=1e-9)  # the line a robot follows ends there
+    assert np.hypot(*np.diff(route.path[:, :2], axis=0).T).sum() == pytest.approx(route.length_m)
     east = plan_route(streets.state, f"object {between}", start=streets.at(150, 0))  # the other way: from 65
     assert east.goal.experience == streets.at(65, 0) and east.length_m == pytest.approx(east.along_m[-1] + 2.5)
     np.testing.assert_allclose(east.goal.position[:2], [62.5, 0.0], atol=1e-9)

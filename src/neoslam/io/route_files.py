@@ -45,8 +45,9 @@ def write_route_csv(path: Path, route: Route) -> None:
 
 
 def route_features(route: Route) -> dict[str, Any]:
-    """The route as a FeatureCollection: a LineString of the waypoints and Point features for the start and the goal
-    (its target, what the goal stands for, with the experience the route ends at)."""
+    """The route as a FeatureCollection: a LineString of the line a robot follows (the waypoints, to where the route
+    ends: `Route.path`) and Point features for the start and the goal (its target, what the goal stands for, with
+    the experience the route ends at)."""
     goal = route.goal
     found = goal.object
     goal_properties: dict[str, Any] = {
@@ -63,7 +64,7 @@ def route_features(route: Route) -> dict[str, Any]:
         goal_properties["object"] = _object_properties(found)
     line = {
         "type": "Feature",
-        "geometry": {"type": "LineString", "coordinates": [_point(p) for p in route.positions]},
+        "geometry": {"type": "LineString", "coordinates": [_point(p) for p in route.path]},
         "properties": {
             "role": "route",
             "experiences": [int(e) for e in route.experiences],

@@ -36,7 +36,8 @@ _JOINED_M = 0.01  # points this close are one
 class Route:
     """A route over the experience map, start first. Poses are the experiences' corrected poses T_map_robot (map
     frame); `along_m` the distance along the route at each of them (0 at the start); `length_m` to where it ends:
-    its last experience, or the point it goes on to (an object's street point, a point goal: `route_finish`)."""
+    its last experience, or the point it goes on to (an object's street point, a point goal: `route_finish`);
+    `path` the line a robot follows there, which ends at that point (cut where the route passes it)."""
 
     experiences: np.ndarray  # (m,) int
     poses: np.ndarray  # (m, 4, 4)
@@ -45,6 +46,7 @@ class Route:
     expected_time_s: float | None  # None: no experience on it recorded a speed (the time would be a guess)
     goal: ResolvedGoal
     start: int  # the experience it starts from
+    path: np.ndarray  # (k, 3) map frame
 
     def __len__(self) -> int:
         return len(self.experiences)
@@ -191,13 +193,13 @@ class RoutePlanner:
         along = np.concatenate([[0.0], np.cumsum(self.graph.lengths(*steps))])
         expected = float(self.graph.times(*steps).sum()) if self.graph.known_speed(path) else None
         poses = np.array(self.view.poses[path], dtype=float)
-        length = float(along[-1])
+        points, length = poses[:, :3, 3].copy(), float(along[-1])
         navigation = self.config.navigation
-        finish = route_finish(goal, poses[-1, :3, 3], navigation)
+        finish = route_finish(goal, points[-1], navigation)
         if finish is not None:
-            cut = leg_to(finish, poses[:, :3, 3], along, np.arange(len(path)), navigation.goal_radius)
-            length = float(cut[1][-1])
-        return Route(path, poses, along, length, expected, goal, int(path[0]))
+            points, cut_along, _ = leg_to(finish, points, along, np.arange(len(path)), navigation.goal_radius)
+            length = float(cut_along[-1])
+        return Route(path, poses, along, length, expected, goal, int(path[0]), points)
 
     def _require_experiences(self) -> None:
         if len(self.graph) == 0:

@@ -29,7 +29,7 @@ def plot_route(path: Path, positions: np.ndarray, pairs: np.ndarray, route: Rout
     axes.add_collection(LineCollection(segments, colors="0.75", linewidths=0.6, label="map links"))
     axes.plot(*positions[:, :2].T, ".", color="0.6", markersize=1.5)
     _objects(axes, objects, route)
-    axes.plot(*route.positions[:, :2].T, color="tab:red", linewidth=2.4, zorder=4, label="route")
+    axes.plot(*route.path[:, :2].T, color="tab:red", linewidth=2.4, zorder=4, label="route")
     start = route.positions[0]
     axes.plot(*start[:2], "^", color="tab:green", markersize=11, zorder=5, label=f"start (experience {route.start})")
     goal = route.goal
