@@ -186,6 +186,7 @@ class NeoSLAM:
         self.grid_cells.reset((stored.grid_cell + shift) % np.asarray(self.grid_cells.dims))
         self.head_direction.reset((stored.head_direction + turn) % self.head_direction.cells)
         self._grid_centre = self.grid_cells.centre  # the unwrapped decoded position goes on, not by the jump
+        self.experience_map.recalled(stored.id, self._cell_state(), self._cell_state())
 
     @property
     def frames_processed(self) -> int:
@@ -295,6 +296,11 @@ class NeoSLAM:
             recall.hd_indices[:, None], recall.hd_weights, (ring,), np.array([turn]), hd.shift_kernel
         )
         self.head_direction.inject_pattern(hd_cells[:, 0], hd_weights, gain * hd.injection_energy)
+        experience = self.experience_map.keyframe_experiences.get(closure.match_keyframe)
+        if experience is not None:  # the drift gate's chain of anchors (neoslam.mapping.cell_lineage)
+            place = self.experience_map.experiences[experience]
+            recalled = CellState(place.grid_cell + shift, (place.head_direction + turn) % ring)
+            self.experience_map.recalled(experience, self._cell_state(), recalled)
 
     def _record(self, frame: Frame, pose: np.ndarray) -> None:
         if self._recorded == FRAMES_PER_CHUNK * len(self._chunks):

@@ -295,18 +295,43 @@ def test_the_drift_gate_admits_the_drift_of_the_metres_since_the_stored_experien
     assert len(experience_map.rejected_closures) == (not accepted)
 
 
-def test_the_drift_gate_is_the_papers_check_soon_after_a_closure() -> None:
-    """After 1 km without a closure the gate admits 27 cells; an accepted closure re-anchors the cells, and 50 m
-    later a closure whose cells are 10 bins off (implausible after 50 m of drift) is rejected, although the stored
-    experience was made 1050 m before."""
+def test_the_drift_gate_is_the_papers_check_soon_after_a_recall_at_the_candidate() -> None:
+    """After 1 km without a closure the gate admits 27 cells; a recall at the stored experience re-anchors the cells
+    there, and 50 m later a closure whose cells are 10 bins off (implausible after 50 m of drift) is rejected,
+    although the stored experience was made 1050 m before."""
     experience_map = long_drive_map("drift", 1000.0)
     assert experience_map.close_loop(closure(1, 0, np.eye(4)), cells((12, 0, 0)))
+    experience_map.recalled(0, cells((0.5, 0, 0)), cells((0.5, 0, 0)))
     experience_map.step(2, pose(0.0, (1050, 0, 0)), VELOCITIES, cells((10, 0, 0)), 50.0, 2)
 
     implausible = closure(2, 0, np.eye(4))
     assert not experience_map.close_loop(implausible, cells((10, 0, 0)))  # 10 > 7 + 2 x 0.5
     assert experience_map.rejected_closures == [implausible]
     assert experience_map.close_loop(closure(2, 0, np.eye(4)), cells((8, 0, 0)))  # 8 <= 8
+
+
+def test_the_drift_gate_follows_the_chain_through_a_recalled_place_to_the_candidate() -> None:
+    """Keyframe 0, then 1 km to keyframe 1, then 10 m to keyframe 2. A recall at keyframe 1's experience re-anchors
+    the cells there; 10 m on, a closure with keyframe 0 is judged over the 1 km that separates keyframe 1's cells
+    from keyframe 0's, not over the 10 m since the recall."""
+    experience_map = long_drive_map("drift", 1000.0)
+    experience_map.step(2, pose(0.0, (1010, 0, 0)), VELOCITIES, cells((13, 0, 0)), 10.0, 2)
+    experience_map.recalled(1, cells((12, 0, 0)), cells((12, 0, 0)))
+    experience_map.step(3, pose(0.0, (1020, 0, 0)), VELOCITIES, cells((13, 0, 0)), 10.0, None)
+
+    assert experience_map.lineage.chain_metres(0) == pytest.approx(1010.0)
+    assert experience_map.close_loop(closure(2, 0, np.eye(4)), cells((13, 0, 0)))  # 13 <= 7 + 2 x 10.1
+
+
+def test_a_recall_the_cells_did_not_take_leaves_the_chain_as_it_was() -> None:
+    """The cells stayed 10 bins from the recalled place (the injection lost against their packet): they are not
+    anchored there, and the gate still judges by the metres since keyframe 0 was made."""
+    experience_map = long_drive_map("drift", 1000.0)
+    experience_map.recalled(0, cells((10, 0, 0)), cells((0, 0, 0)))
+    assert experience_map.lineage.anchor == 1
+    assert experience_map.lineage.chain_metres(0) == pytest.approx(1000.0)
+    experience_map.recalled(0, cells((1, 0, 0)), cells((0, 0, 0)))  # within S_max (3 cells) of the place: taken
+    assert experience_map.lineage.anchor == 0 and experience_map.lineage.chain_metres(0) == 0.0
 
 
 def test_the_drift_gate_also_decides_which_closures_are_revisits() -> None:

@@ -21,14 +21,16 @@ class ExperienceMapConfig(Section):
         "drift",
         description="which closures the map accepts: grid-cells, the paper's check (the recognised experience's "
         "cells within gc_distance_threshold of the current); drift, that check widened by gc_drift_cells_per_100m "
-        "for the travel since the stored experience was made or the last accepted closure, whichever is less (the "
-        "cells drift with the odometry); none, every closure the loop detector accepted",
+        "for the metres of path integration between the current cells and the stored experience's, along the chain "
+        "of places recalls anchored them at (the cells drift with the odometry); none, every closure the loop "
+        "detector accepted",
     )
     gc_drift_cells_per_100m: float = Field(
         2.0,
         ge=0,
         le=1000,
-        description="closure_gate drift: cells added to gc_distance_threshold per 100 m travelled since, cells "
+        description="closure_gate drift: cells added to gc_distance_threshold per 100 m of path integration between "
+        "the two cell states, cells "
         "(2: 16 m horizontally and 2 m vertically per 100 m, above the drift of true closures under heavy odometry)",
     )
     similarity_threshold: float = Field(3.0, gt=0, le=1000, description="S_max of eq. 17, cells")

@@ -8,9 +8,10 @@ A loop closure is accepted only when the recognised experience's grid-cell state
 `gc_distance_threshold` cells of the current one (the paper's second guard, `closure_gate: grid-cells`); it then
 links the two experiences with the metric transform of the object fit and triggers the correction. The cells
 integrate the odometry, so they drift with it: `closure_gate: drift` (beyond the paper) widens the allowed distance
-by `gc_drift_cells_per_100m` for every 100 m travelled since the robot last knew where it was (since the stored
-experience was made, or since the last accepted closure, whichever is fewer), as the loop detector's retrieval
-radius widens with the distance travelled.
+by `gc_drift_cells_per_100m` for every 100 m of path integration between the cells now and the stored experience's
+cells, along the chain of anchors the two were derived from (neoslam.mapping.cell_lineage: a recall re-anchors the
+cells at a stored place, whose own cells were derived from earlier ones), as the loop detector's retrieval radius
+widens with the distance travelled.
 
 Lifelong mapping (`reuse_places`, RatSLAM's and NeuroSLAM's rule, beyond the paper): a street driven again must
 not add a copy of itself. A new keyframe that a closure recognises as a stored one (cells within the guard, heading
@@ -43,6 +44,7 @@ import numpy as np
 from neoslam.config import ExperienceMapConfig
 from neoslam.geometry import invert_pose, rotation_angle, yaw_of
 from neoslam.mapping.backend import MapBackend
+from neoslam.mapping.cell_lineage import CellLineage
 from neoslam.mapping.graph import MapGraph
 from neoslam.mapping.parts import MapParts
 from neoslam.types import Experience, Link, LoopClosure, MapState, Trajectory
@@ -107,7 +109,7 @@ class ExperienceMap:
         self._travelled_since = 0.0
         self._odometer = 0.0
         self._localised_at = -np.inf  # odometer reading of the last recognised place
-        self._made_at: list[float] = []  # odometer reading when each experience was made (closure gate: drift)
+        self.lineage = CellLineage()  # where each experience's cells came from (closure gate: drift)
         self.rejected_closures: list[LoopClosure] = []
         self.accepted_closures: list[LoopClosure] = []
         self.backend = MapBackend(config)  # corrects the graph (relaxation, pose graph, object landmarks)
@@ -151,6 +153,7 @@ class ExperienceMap:
         the robot knows where it is, re-enter an experience at the corrected pose if there is one."""
         self._travelled_since += travelled_m
         self._odometer += travelled_m
+        self.lineage.travelled(travelled_m)
         if revisit is not None:
             self._reenter(revisit, odometry_pose, cells, keyframe_id)
         elif (
@@ -199,7 +202,7 @@ class ExperienceMap:
             self.graph.add_node(odometry_pose.copy())
         self.experiences.append(experience)
         self._odometry_poses.append(odometry_pose.copy())
-        self._made_at.append(self._odometer)
+        self.lineage.made()
         if keyframe_id is not None:
             self._by_keyframe[keyframe_id] = experience.id
         self._begin_visit(experience.id, odometry_pose, cells, new=True)
@@ -269,15 +272,25 @@ class ExperienceMap:
 
     def _allowed_cell_distance(self, experience: int) -> float:
         """The paper's guard, gc_distance_threshold cells; the drift gate adds gc_drift_cells_per_100m for every
-        100 m the cells have integrated odometry since they last agreed with the map: since the stored experience
-        was made (its cells are those of then) or since the last accepted closure (whose recall re-anchored the
-        cells), whichever is fewer. Right after a closure it is the paper's check; after a long loop it admits the
-        drift the odometry may have gathered on it."""
+        100 m of path integration between the cells now and the stored experience's cells, along the chain of
+        anchors they were derived from (CellLineage). Right after a recall at the candidate's neighbour it is the
+        paper's check; after a long loop, or after a recall at a place made long after the candidate, it admits
+        the drift the odometry may have gathered along the chain. A chain longer than the grid can tell apart
+        (the allowed distance beyond the farthest cells) opens the gate."""
         threshold = self.config.gc_distance_threshold
-        if self.config.closure_gate != "drift":
+        rate = self.config.gc_drift_cells_per_100m
+        if self.config.closure_gate != "drift" or rate == 0:
             return threshold
-        travelled = self._odometer - max(self._made_at[experience], self._localised_at)
-        return threshold + self.config.gc_drift_cells_per_100m * travelled / 100.0
+        farthest = float(np.linalg.norm(self.grid_dims / 2.0))
+        limit = 100.0 * max(farthest - threshold, 0.0) / rate
+        return threshold + rate * self.lineage.chain_metres(experience, limit) / 100.0
+
+    def recalled(self, experience: int, cells: CellState, recalled: CellState) -> None:
+        """A recall injected a stored experience's cell state, moved to where the robot is (`recalled`): if the
+        cells took it (by eq. 17 they are in that state: S <= S_max), they are anchored at the experience from now
+        on. A recall the cells did not take (too weak against their packet) leaves the chain as it was."""
+        if self._similarity(cells, recalled.grid, recalled.head_direction) <= self.config.similarity_threshold:
+            self.lineage.anchored(experience)
 
     def _nearest(self, pose: np.ndarray, keyframes_only: bool) -> int | None:
         """The experience nearest to a corrected pose within `reuse_radius`, heading within `reuse_max_turn_deg`."""
@@ -419,7 +432,8 @@ class ExperienceMap:
         for link in state.links:
             self._link(link)
         self._odometry_poses = [e.pose for e in self.experiences]
-        self._made_at = [-np.inf] * len(self.experiences)  # another session's: the gate does not compare its cells
+        self.lineage = CellLineage()
+        self.lineage.restored(len(self.experiences))  # another session's: the gate does not compare its cells
         self._by_keyframe = dict(state.keyframe_experience)
         self.backend.rebuild(self.graph)
 
