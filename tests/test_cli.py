@@ -421,7 +421,8 @@ def test_experience_map_json_agrees_with_metrics(block_runs: dict[str, Path], ba
     payload = json.loads((out / "experience_map.json").read_text())
     experiences, links = payload["experiences"], payload["links"]
 
-    assert set(block) == {"backend", "experiences", "links", "closures_rejected_by_grid_cells"}
+    assert set(block) == {"backend", "experiences", "links", "links_withdrawn", "closures_rejected_by_grid_cells"}
+    assert block["links_withdrawn"] == sum(link["withdrawn"] for link in links)
     assert len(experiences) == block["experiences"] > 1
     assert len(links) == block["links"]
     assert isinstance(block["closures_rejected_by_grid_cells"], int) and block["closures_rejected_by_grid_cells"] >= 0

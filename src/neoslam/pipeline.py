@@ -342,6 +342,7 @@ class NeoSLAM:
             experiences=self.experience_map.experiences,
             experience_poses=self.experience_map.graph.poses,
             links=self.experience_map.graph.links,
+            withdrawn_links=self.experience_map.withdrawn_links,
             closures=[*self.stored.closures, *closures],
             objects=self.object_map.state(),
             hebbian=self.hebbian.traces(),

@@ -243,6 +243,7 @@ class MapState:
     experiences: list[Experience] = field(default_factory=list)  # ids 0..n-1; .pose is the odometry pose
     experience_poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 4)))  # corrected, map frame
     links: list[Link] = field(default_factory=list)
+    withdrawn_links: list[int] = field(default_factory=list)  # loop links taken out again (indices into links)
     closures: list[StoredClosure] = field(default_factory=list)
     objects: ObjectMapState = field(default_factory=ObjectMapState)
     hebbian: dict[int, HebbianTrace] = field(default_factory=dict)  # keyframe id -> its association

@@ -156,6 +156,8 @@ class Growth:
             experiences=experiences,
             experience_poses=poses,
             links=links,
+            # every second loop link was withdrawn again (a map that healed), in the order the links were made
+            withdrawn_links=[i for i, link in enumerate(links) if link.kind == "loop" and link.source % 10 == 0],
             closures=closures,
             objects=self.objects(step),
             hebbian=hebbian,

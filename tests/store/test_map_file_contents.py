@@ -133,6 +133,14 @@ CORRUPTIONS: dict[str, tuple[Callable[[Path], None], str]] = {
         sql("UPDATE links SET target = 99999 WHERE id = 3"),
         "table links, row id 3: target is 99999, outside 0 .. 18",
     ),
+    "withdrawn link that is an odometry link": (
+        sql("INSERT INTO withdrawn_links (link) VALUES (0)"),
+        "table withdrawn_links, row link 0: names an odometry link: only loop links are withdrawn",
+    ),
+    "withdrawn link that is not in the map": (
+        sql("INSERT INTO withdrawn_links (link) VALUES (9999)"),
+        "table withdrawn_links, row link 9999: link is 9999, outside 0 .. 20",
+    ),
     "observation of a missing object": (
         sql("UPDATE object_observations SET object = 999 WHERE object = 0 AND experience = 0"),
         "table object_observations, row object 999, experience 0: object is 999, outside 0 .. 8",
@@ -170,16 +178,16 @@ CORRUPTIONS: dict[str, tuple[Callable[[Path], None], str]] = {
     ),
     "a table missing": (sql("DROP TABLE links"), "corrupt map file (no table links)"),
     "another format version in the header": (
-        sql("PRAGMA user_version = 4"),
-        "map format version 4 (a newer NeoSLAM's) in its header's user_version; this NeoSLAM reads version 3",
+        sql("PRAGMA user_version = 5"),
+        "map format version 5 (a newer NeoSLAM's) in its header's user_version; this NeoSLAM reads version 4",
     ),
     "an older format version in the header": (
-        sql("PRAGMA user_version = 2"),
-        "map format version 2 in its header's user_version; this NeoSLAM reads version 3",
+        sql("PRAGMA user_version = 3"),
+        "map format version 3 in its header's user_version; this NeoSLAM reads version 4",
     ),
     "no user_version": (
         sql("PRAGMA user_version = 0"),
-        "a SQLite database but not a NeoSLAM map (its header's user_version is 0; a map's is its format version, 3)",
+        "a SQLite database but not a NeoSLAM map (its header's user_version is 0; a map's is its format version, 4)",
     ),
 }
 

@@ -34,6 +34,7 @@ def run_metrics(dataset: Dataset, result: RunResult, config: NeoSLAMConfig, wall
         "backend": experience_map.config.backend,
         "experiences": len(experience_map.experiences),
         "links": len(experience_map.graph.links),
+        "links_withdrawn": len(experience_map.withdrawn_links),
         "closures_rejected_by_grid_cells": len(experience_map.rejected_closures),
     }
     metrics["hebbian_bytes"] = result.hebbian.nbytes

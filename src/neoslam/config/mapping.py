@@ -57,6 +57,14 @@ class ExperienceMapConfig(Section):
     loop_yaw_sigma: float = Field(0.02, ge=1e-6, le=10, description="pose graph: std of a loop link's yaw, rad")
     robust_kernel: Literal["huber", "cauchy", "none"] = Field("huber", description="pose graph: loop-link kernel")
     robust_threshold: float = Field(3.0, gt=0, le=1000, description="pose graph: kernel scale, in standard deviations")
+    withdraw_sigmas: float = Field(
+        3.0,
+        ge=0,
+        le=1000,
+        description="pose graph (without object landmarks): after each optimisation the loop link the map disagrees "
+        "with most beyond this many standard deviations (its whitened residual) is withdrawn and the map solved again "
+        "without it, until every loop link agrees: a wrong closure the gate let through is undone; 0: never",
+    )
     object_landmarks: bool = Field(
         False,
         description="pose graph: the object map's confirmed objects become landmarks (a Point3 each, a bearing-range "

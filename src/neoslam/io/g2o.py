@@ -46,11 +46,12 @@ def link_information(link, config) -> np.ndarray:
 
 
 def write_g2o(path: Path, experience_map) -> None:
-    """experience_map.g2o: one vertex per experience (corrected pose), one edge per link, experience 0 fixed."""
+    """experience_map.g2o: one vertex per experience (corrected pose), one edge per link in use (not the withdrawn),
+    experience 0 fixed."""
     graph = experience_map.graph
     rows, cols = np.triu_indices(6)
     lines = [f"VERTEX_SE3:QUAT {index} {_pose_numbers(pose)}" for index, pose in enumerate(graph.poses)]
-    for link in graph.links:
+    for link in graph.live_links():
         information = link_information(link, experience_map.config)[rows, cols]
         lines.append(
             f"EDGE_SE3:QUAT {link.source} {link.target} {_pose_numbers(link.relative)} {_numbers(information)}"

@@ -91,8 +91,11 @@ def _pose_record(pose: np.ndarray) -> dict[str, float]:
 
 
 def write_experience_map(path: Path, experience_map) -> None:
-    """experience_map.json: experiences (cells, corrected and odometry pose, keyframe) and links (eq. 15-16)."""
+    """experience_map.json: experiences (cells, corrected and odometry pose, keyframe) and links (eq. 15-16), each
+    with whether it was withdrawn (a loop link the optimised map disagreed with: kept for the record, out of the
+    map)."""
     graph = experience_map.graph
+    withdrawn = set(graph.withdrawn)
     experiences = [
         {
             "id": e.id,
@@ -113,8 +116,9 @@ def write_experience_map(path: Path, experience_map) -> None:
             "kind": k.kind,
             "distance_m": round(k.distance_m, 4),
             "relative": _pose_record(k.relative),
+            "withdrawn": index in withdrawn,
         }  # fmt: skip
-        for k in graph.links
+        for index, k in enumerate(graph.links)
     ]
     payload = {"backend": experience_map.config.backend, "experiences": experiences, "links": links}
     path.write_text(json.dumps(payload, separators=(",", ":")) + "\n")

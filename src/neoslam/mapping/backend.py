@@ -4,6 +4,9 @@ once the map has a loop, or pose-graph optimisation at each loop link (`backend:
 whenever the robot leaves an experience (its observation sums are then complete).
 
 Only the robot's part of the map is corrected: a stored session not joined yet stays as stored (neoslam.store).
+Each pose-graph optimisation re-checks every loop link of that part (`withdraw_sigmas`): the one the optimised map
+disagrees with most, beyond that many standard deviations, is withdrawn and the part solved again without it, until
+every loop link agrees (a map that heals from a wrong closure; neoslam.mapping.healing).
 The back end keeps the links' measurements (relaxation) and the landmark solver; the experience map owns the graph.
 """
 
@@ -17,9 +20,10 @@ import numpy as np
 
 from neoslam.config import ExperienceMapConfig
 from neoslam.mapping.graph import MapGraph
+from neoslam.mapping.healing import disagreeing_link
 from neoslam.mapping.landmarks import LOOP_ITERATIONS, LandmarkSolver, ObservationSource
 from neoslam.mapping.parts import MapParts
-from neoslam.mapping.pose_graph import optimise_pose_graph
+from neoslam.mapping.pose_graph import PoseGraphReport, optimise_pose_graph
 from neoslam.mapping.relaxation import LinkMeasurement, link_measurement, relax
 from neoslam.types import Link
 
@@ -76,18 +80,21 @@ class MapBackend:
     def rebuild(self, graph: MapGraph) -> None:
         """The graph was replaced or moved (a restore, a join): measurements again, the landmark solver anew."""
         self._landmarks = None
-        self._measurements = [link_measurement(graph, link) for link in graph.links]
+        self._measurements = [link_measurement(graph, link) for link in graph.live_links()]
 
-    def optimise(self, experience_map: CorrectedMap) -> None:
-        """At a loop link: the pose graph of the robot's part of the map (with landmarks, an iSAM2 update)."""
+    def optimise(self, experience_map: CorrectedMap) -> list[int]:
+        """At a loop link: the pose graph of the robot's part of the map (with landmarks, an iSAM2 update).
+        Returns the loop links withdrawn (indices into graph.links; only without landmarks)."""
         if self.config.backend != "pose-graph":
-            return
+            return []
         start = time.perf_counter()
+        withdrawn: list[int] = []
         if self.uses_landmarks:
             self._solve_landmarks(experience_map, LOOP_ITERATIONS)
         else:
-            self._optimise_part(experience_map)
+            withdrawn = self._optimise_part(experience_map)
         self.seconds += time.perf_counter() - start
+        return withdrawn
 
     def correct(self, experience_map: CorrectedMap, has_loop: bool) -> None:
         """Per frame: the paper's relaxation passes once the map has a loop (`has_loop`); with object landmarks, an
@@ -104,33 +111,48 @@ class MapBackend:
                 measurements = [m for m in measurements if part[m[0]]]
             relax(experience_map.graph, measurements, self.config.correction_factor, self.config.correction_loops)
 
-    def finish(self, experience_map: CorrectedMap, waiting: bool) -> None:
+    def finish(self, experience_map: CorrectedMap, waiting: bool) -> list[int]:
         """The map as the last frame leaves it: the links still `waiting` optimised; with object landmarks, also
-        the observations of the experience the robot is in."""
+        the observations of the experience the robot is in. Returns the loop links withdrawn."""
         if self.uses_landmarks and experience_map.current >= 0:
             start = time.perf_counter()
             self._solve_landmarks(experience_map, LOOP_ITERATIONS if waiting else 0, final=True)
             self.seconds += time.perf_counter() - start
         elif waiting:
-            self.optimise(experience_map)
+            return self.optimise(experience_map)
+        return []
 
-    def _optimise_part(self, experience_map: CorrectedMap) -> None:
+    def _optimise_part(self, experience_map: CorrectedMap) -> list[int]:
+        """The robot's part by the pose graph, again after withdrawing each loop link it disagrees with."""
         graph, parts = experience_map.graph, experience_map.parts
         part = parts.members(parts.part_of(experience_map.current))
+        withdrawn: list[int] = []
+        while True:
+            report = self._solve_part(graph, part)
+            link = disagreeing_link(graph, report, part, self.config.withdraw_sigmas)
+            if link is None:
+                return withdrawn
+            graph.withdrawn.append(link)
+            withdrawn.append(link)
+
+    def _solve_part(self, graph: MapGraph, part: np.ndarray) -> PoseGraphReport:
+        """One pose-graph solve of the experiences in `part`, its report's link indices into graph.links."""
         if part.all():
-            optimise_pose_graph(graph, self.config)
-            return
+            return optimise_pose_graph(graph, self.config)
         nodes = np.flatnonzero(part)
         renumbered = np.full(len(part), -1)
         renumbered[nodes] = np.arange(len(nodes))  # the part's first node, its frame's anchor, becomes node 0
+        indices = [index for index in graph.live() if part[graph.links[index].source]]
         links = [
-            replace(link, source=int(renumbered[link.source]), target=int(renumbered[link.target]))
-            for link in graph.links
-            if part[link.source]
-        ]
+            replace(graph.links[index], source=int(renumbered[graph.links[index].source]),
+                    target=int(renumbered[graph.links[index].target]))
+            for index in indices
+        ]  # fmt: skip
         piece = MapGraph(graph.poses[nodes].copy(), links)
-        optimise_pose_graph(piece, self.config)
+        report = optimise_pose_graph(piece, self.config)
         graph.poses[nodes] = piece.poses
+        loops = tuple(replace(loop, link_index=indices[loop.link_index]) for loop in report.loops)
+        return replace(report, loops=loops)
 
     def _landmarks_due(self, experience_map: CorrectedMap) -> bool:
         """Whether the landmark solver has something to add: no solver yet, or an experience the robot left."""

@@ -218,12 +218,29 @@ class ExperienceMap:
 
     def _optimise(self) -> None:
         self._unoptimised = 0
-        self.backend.optimise(self)
+        self._unlink(self.backend.optimise(self))
+
+    def _unlink(self, withdrawn: list[int]) -> None:
+        """Links the back end withdrew: their pairs are not linked any more (unless another link joins them), so
+        that a later closure between the two may link them again."""
+        if not withdrawn:
+            return
+        live = {(min(k.source, k.target), max(k.source, k.target)) for k in self.graph.live_links()}
+        for index in withdrawn:
+            link = self.graph.links[index]
+            pair = (min(link.source, link.target), max(link.source, link.target))
+            if pair not in live:
+                self._linked.discard(pair)
+
+    @property
+    def withdrawn_links(self) -> list[int]:
+        """Loop links withdrawn because the optimised map disagreed with them (indices into graph.links)."""
+        return self.graph.withdrawn
 
     def finish(self) -> None:
         """Optimise the links still waiting (see BATCHED_LINKS): the map as the last frame leaves it (with object
         landmarks, also the observations of the experience the robot is in)."""
-        self.backend.finish(self, waiting=self._unoptimised > 0)
+        self._unlink(self.backend.finish(self, waiting=self._unoptimised > 0))
         self._unoptimised = 0
 
     def recognise(
@@ -239,7 +256,7 @@ class ExperienceMap:
         pose = self.current_pose(odometry_pose)
         if own is not None:
             stored = self._by_keyframe.get(own.match_keyframe)
-            if stored is None or not self._cells_agree(cells, stored):
+            if stored is None or not self.cells_agree(cells, stored):
                 return None
             turn = float(np.degrees(rotation_angle(own.relative_pose[:3, :3])))
             in_map = invert_pose(self.graph.poses[stored]) @ pose  # where the map has the robot
@@ -262,7 +279,7 @@ class ExperienceMap:
         close = np.linalg.norm(error[:2, 3]) <= self.config.reentry_distance
         return bool(close and np.degrees(rotation_angle(error[:3, :3])) <= self.config.reentry_yaw_deg)
 
-    def _cells_agree(self, cells: CellState, experience: int) -> bool:
+    def cells_agree(self, cells: CellState, experience: int) -> bool:
         """The closure gate (`closure_gate`): the recognised experience's grid cells within the allowed distance of
         the current (for an experience of this session: another session's cells started elsewhere)."""
         if self.config.closure_gate == "none" or self.experiences[experience].session != self.session:
@@ -367,7 +384,7 @@ class ExperienceMap:
             return False
         if self.parts.part_of(stored) != self.parts.part_of(self.current):
             return False  # a stored session's part not joined (see join): its frame is not this one's
-        if not self._cells_agree(cells, stored):
+        if not self.cells_agree(cells, stored):
             self.rejected_closures.append(closure)
             return False
         self.accepted_closures.append(closure)
@@ -431,6 +448,8 @@ class ExperienceMap:
             self.parts.add()
         for link in state.links:
             self._link(link)
+        self.graph.withdrawn = list(state.withdrawn_links)
+        self._unlink(self.graph.withdrawn)
         self._odometry_poses = [e.pose for e in self.experiences]
         self.lineage = CellLineage()
         self.lineage.restored(len(self.experiences))  # another session's: the gate does not compare its cells

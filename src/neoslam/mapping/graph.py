@@ -17,7 +17,19 @@ class MapGraph:
     """Experience poses T_world_robot (n, 4, 4), corrected in place by a back end, and their links."""
 
     poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 4)))
-    links: list[Link] = field(default_factory=list)
+    links: list[Link] = field(default_factory=list)  # every link ever made: a link keeps its index
+    withdrawn: list[int] = field(default_factory=list)  # links taken out again, in the order they were
+
+    def live(self) -> list[int]:
+        """Indices of the links in use (all but the withdrawn), in order."""
+        if not self.withdrawn:
+            return list(range(len(self.links)))
+        out = set(self.withdrawn)
+        return [index for index in range(len(self.links)) if index not in out]
+
+    def live_links(self) -> list[Link]:
+        """The links in use."""
+        return [self.links[index] for index in self.live()] if self.withdrawn else self.links
 
     def __len__(self) -> int:
         return len(self.poses)

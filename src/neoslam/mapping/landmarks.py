@@ -152,7 +152,11 @@ class LandmarkSolver:
 
     def _add_links(self, graph: MapGraph, factors) -> None:
         inside = set(self._nodes.tolist())
-        for link in graph.links[self._links :]:
+        withdrawn = set(graph.withdrawn)
+        for index in range(self._links, len(graph.links)):
+            link = graph.links[index]
+            if index in withdrawn:
+                continue
             if link.source in inside and link.target in inside:  # a link always ties one part: both or neither
                 noise = link_noise_model(link, self.config)
                 factors.add(gtsam.BetweenFactorPose3(link.source, link.target, gtsam.Pose3(link.relative), noise))

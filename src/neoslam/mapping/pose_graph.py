@@ -76,10 +76,11 @@ class PoseGraphReport:
 
 
 def optimise_pose_graph(graph: MapGraph, config: ExperienceMapConfig) -> PoseGraphReport:
-    """Correct graph.poses in place by Levenberg-Marquardt over all links; node 0 stays where it is."""
+    """Correct graph.poses in place by Levenberg-Marquardt over the links in use; node 0 stays where it is."""
     if len(graph) == 0:
         return PoseGraphReport(iterations=0, initial_error=0.0, final_error=0.0, loops=())
-    factors, sigmas = _build_factors(graph, config)
+    live = graph.live()
+    factors, sigmas = _build_factors(graph, live, config)
     initial = _initial_values(graph.poses)
     optimiser = gtsam.LevenbergMarquardtOptimizer(factors, initial, _lm_parameters())
     result = optimiser.optimize()
@@ -88,17 +89,21 @@ def optimise_pose_graph(graph: MapGraph, config: ExperienceMapConfig) -> PoseGra
         iterations=optimiser.iterations(),
         initial_error=factors.error(initial),
         final_error=factors.error(result),
-        loops=_loop_residuals(graph, factors, sigmas, result, config),
+        loops=_loop_residuals(graph, live, factors, sigmas, result, config),
     )
 
 
-def _build_factors(graph: MapGraph, config: ExperienceMapConfig) -> tuple[gtsam.NonlinearFactorGraph, np.ndarray]:
-    """The factor graph (anchor prior at index 0, then one between-factor per link) and each link's sigmas."""
+def _build_factors(
+    graph: MapGraph, live: list[int], config: ExperienceMapConfig
+) -> tuple[gtsam.NonlinearFactorGraph, np.ndarray]:
+    """The factor graph (anchor prior at index 0, then one between-factor per link in use, `live`) and each such
+    link's sigmas."""
     factors = gtsam.NonlinearFactorGraph()
     anchor_noise = gtsam.noiseModel.Isotropic.Sigma(6, ANCHOR_SIGMA)
     factors.add(gtsam.PriorFactorPose3(0, gtsam.Pose3(graph.poses[0]), anchor_noise))
-    sigmas = np.array([link_sigmas(link, config) for link in graph.links]).reshape(-1, 6)
-    for link, link_sigma in zip(graph.links, sigmas, strict=True):
+    links = [graph.links[index] for index in live]
+    sigmas = np.array([link_sigmas(link, config) for link in links]).reshape(-1, 6)
+    for link, link_sigma in zip(links, sigmas, strict=True):
         noise = _noise_model(link, link_sigma, config)
         factors.add(gtsam.BetweenFactorPose3(link.source, link.target, gtsam.Pose3(link.relative), noise))
     return factors, sigmas
@@ -167,20 +172,21 @@ def poses_from_values(values: gtsam.Values, count: int) -> np.ndarray:
 
 def _loop_residuals(
     graph: MapGraph,
+    live: list[int],
     factors: gtsam.NonlinearFactorGraph,
     sigmas: np.ndarray,
     values: gtsam.Values,
     config: ExperienceMapConfig,
 ) -> tuple[LoopResidual, ...]:
-    """Residual of each loop link at the solution; factor i + 1 is link i (factor 0 is the anchor)."""
+    """Residual of each loop link in use at the solution; factor i + 1 is link live[i] (factor 0 is the anchor)."""
     translation = graph.link_residuals()
     kernel = _robust_kernel(config)
     residuals = []
-    for index, link in enumerate(graph.links):
-        if link.kind != "loop":
+    for factor, index in enumerate(live):
+        if graph.links[index].kind != "loop":
             continue
-        error = factors.at(index + 1).unwhitenedError(values)
-        whitened = float(np.linalg.norm(error / sigmas[index]))
+        error = factors.at(factor + 1).unwhitenedError(values)
+        whitened = float(np.linalg.norm(error / sigmas[factor]))
         weight = 1.0 if kernel is None else float(kernel.weight(whitened))
         residuals.append(LoopResidual(index, float(translation[index]), whitened, weight))
     return tuple(residuals)

@@ -74,6 +74,7 @@ class NavigationGraph:
         self.pairs = np.zeros((0, 2), dtype=int)  # linked experiences, smaller id first, each pair once
         self._links: Sequence[Link] | None = None  # the list the pairs were read from
         self._links_read = 0
+        self._withdrawn_read = 0  # withdrawn links known when the pairs were read
         self._pair_keys: set[tuple[int, int]] = set()
         self._matrix: csr_matrix | None = None  # None: rebuilt when next asked
         self._tree: cKDTree | None = None
@@ -96,7 +97,7 @@ class NavigationGraph:
             self.positions = positions.copy()
             self._tree = None
         self._read_experiences(view)
-        linked = self._read_links(view.links, len(positions))
+        linked = self._read_links(view.links, view.withdrawn, len(positions))
         if moved or linked:
             self._matrix = None
         if linked:
@@ -119,17 +120,22 @@ class NavigationGraph:
         self.sessions = np.concatenate([self.sessions[:known], sessions])
         self.frames = np.concatenate([self.frames[:known], frames])
 
-    def _read_links(self, links: Sequence[Link], n: int) -> bool:
-        """Take the links not read yet (a map's links only grow; another list is read from its start)."""
-        reset = links is not self._links or len(links) < self._links_read
+    def _read_links(self, links: Sequence[Link], withdrawn: Sequence[int], n: int) -> bool:
+        """Take the links not read yet, but the withdrawn (a map's links only grow; another list, or a link
+        withdrawn since, is read from its start)."""
+        reset = links is not self._links or len(links) < self._links_read or len(withdrawn) != self._withdrawn_read
         if reset:
-            self._links, self._links_read = links, 0
+            self._links, self._links_read, self._withdrawn_read = links, 0, len(withdrawn)
             self._pair_keys = set()
             self.pairs = np.zeros((0, 2), dtype=int)
-        new = links[self._links_read :]
+        out = set(withdrawn)
+        start = self._links_read
         self._links_read = len(links)
         added = []
-        for link in new:
+        for index in range(start, len(links)):
+            if index in out:
+                continue
+            link = links[index]
             a, b = sorted((int(link.source), int(link.target)))
             if a != b and a >= 0 and b < n and (a, b) not in self._pair_keys:
                 self._pair_keys.add((a, b))

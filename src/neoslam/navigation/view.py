@@ -28,7 +28,8 @@ class MapView:
 
     experiences: Sequence[Experience]  # ids 0..n-1, in the order they were made
     poses: np.ndarray  # (n, 4, 4) corrected experience poses T_map_robot
-    links: Sequence[Link]
+    links: Sequence[Link]  # every link made, withdrawn ones too (a link keeps its index)
+    withdrawn: Sequence[int]  # loop links withdrawn from the map (indices into links): no road
     keyframe_experience: Mapping[int, int]  # keyframe id -> the experience made with it
     objects: ObjectMapState
     sessions: tuple[SessionRecord, ...]
@@ -53,6 +54,7 @@ def map_view(source: MapSource) -> MapView:
             experiences=source.experiences,
             poses=np.asarray(source.experience_poses, dtype=float).reshape(-1, 4, 4),
             links=source.links,
+            withdrawn=source.withdrawn_links,
             keyframe_experience=source.keyframe_experience,
             objects=source.objects,
             sessions=tuple(source.sessions),
@@ -72,6 +74,7 @@ def _running(slam: NeoSLAM) -> MapView:
         experiences=experience_map.experiences,
         poses=experience_map.graph.poses,
         links=experience_map.graph.links,
+        withdrawn=experience_map.withdrawn_links,
         keyframe_experience=experience_map.keyframe_experiences,
         objects=slam.object_map.state(),
         sessions=(*slam.stored.sessions, session),

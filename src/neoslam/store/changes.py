@@ -50,6 +50,7 @@ class WrittenState:
     experiences: int = 0
     poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 4, 4)))
     links: int = 0
+    withdrawn_links: int = 0
     closures: int = 0
     labels: list[str] = field(default_factory=list)
     object_sums: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
@@ -76,6 +77,7 @@ class WrittenState:
             experiences=len(state.experiences),
             poses=np.array(state.experience_poses, dtype=F8),
             links=len(state.links),
+            withdrawn_links=len(state.withdrawn_links),
             closures=len(state.closures),
             labels=list(objects.labels),
             object_sums=np.array(objects.sums, dtype=F8).reshape(-1, 3),
@@ -108,6 +110,7 @@ class WrittenState:
         add("experience", experience_rows)
         add("poses", pose_blocks)
         add("link", self._links(state, new))
+        add("withdrawn_link", self._withdrawn_links(state, new))
         add("closure", self._closures(state, new))
         add("object", self._objects(state.objects, new))
         observation_rows, gone_rows = self._observations(state.objects, new)
@@ -186,6 +189,19 @@ class WrittenState:
             raise ValueError(f"the map holds {self.links} links; the state only {len(state.links)}")
         new.links = len(state.links)
         return [link_row(index, link) for index, link in enumerate(state.links[self.links :], start=self.links)]
+
+    def _withdrawn_links(self, state: MapState, new: WrittenState) -> list[tuple[Any, ...]]:
+        """Loop links withdrawn since: the list only grows (a withdrawn link stays withdrawn)."""
+        withdrawn = state.withdrawn_links
+        if len(withdrawn) < self.withdrawn_links:
+            raise ValueError(f"the map holds {self.withdrawn_links} withdrawn links; the state only {len(withdrawn)}")
+        rows = []
+        for index in withdrawn[self.withdrawn_links :]:
+            if not (0 <= index < len(state.links) and state.links[index].kind == "loop"):
+                raise ValueError(f"withdrawn link {index} is not a loop link of the map")
+            rows.append((int(index),))
+        new.withdrawn_links = len(withdrawn)
+        return rows
 
     def _closures(self, state: MapState, new: WrittenState) -> list[tuple[Any, ...]]:
         if len(state.closures) < self.closures:

@@ -319,6 +319,13 @@ def _read_graph(rows, state: MapState, sessions: set[int]) -> None:
                 check.real(distance, "distance_m"),
             )
         )
+    check = _Row("withdrawn_links")
+    for (link,) in rows("SELECT link FROM withdrawn_links ORDER BY link"):
+        check.at(link=link)
+        index = check.integer(link, "link", 0, len(state.links) - 1)
+        if state.links[index].kind != "loop":
+            check.fail("names an odometry link: only loop links are withdrawn")
+        state.withdrawn_links.append(index)
     check = _Row("closures")
     for position, (closure_id, session, match_session, *numbers, relative) in enumerate(
         rows(f"SELECT {columns('closures')} FROM closures ORDER BY id")

@@ -59,7 +59,7 @@ __all__ = [
 ]
 
 FORMAT_TAG = "neoslam-map"
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
 APPLICATION_ID = 0x4E534C4D  # "NSLM" at offset 68 of the file header, so that `file` and others can tell a map
 
 F8 = np.dtype("<f8")
@@ -96,6 +96,7 @@ TABLES: dict[str, str] = {
         "CREATE TABLE links (id INTEGER PRIMARY KEY, source INTEGER NOT NULL, target INTEGER NOT NULL, "
         "relative BLOB NOT NULL, kind TEXT NOT NULL CHECK (kind IN ('odometry', 'loop')), distance_m REAL NOT NULL)"
     ),
+    "withdrawn_links": "CREATE TABLE withdrawn_links (link INTEGER PRIMARY KEY)",
     "closures": (
         "CREATE TABLE closures (id INTEGER PRIMARY KEY, session INTEGER NOT NULL, match_session INTEGER NOT NULL, "
         "query_frame INTEGER NOT NULL, match_frame INTEGER NOT NULL, query_keyframe INTEGER NOT NULL, "
@@ -241,6 +242,7 @@ STATEMENTS = {
     "poses": "INSERT INTO experience_poses (block, poses) VALUES (?, ?) ON CONFLICT (block) DO UPDATE SET "
     "poses = excluded.poses",
     "link": "INSERT INTO links (id, source, target, relative, kind, distance_m) VALUES (?, ?, ?, ?, ?, ?)",
+    "withdrawn_link": "INSERT INTO withdrawn_links (link) VALUES (?)",
     "closure": "INSERT INTO closures (id, session, match_session, query_frame, match_frame, query_keyframe, "
     "match_keyframe, score, n_matches, relative_pose) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
     "object": "INSERT INTO objects (id, label, sums, weight, count) VALUES (?, ?, ?, ?, ?) ON CONFLICT (id) DO "

@@ -76,7 +76,7 @@ KNOWN_METRICS = (
     *_named("loops", "accepted", "true_positive", "false_positive", "revisit_frames", "recalled_frames",
             "precision", "recall", "f1", "recall_at_full_precision", "f1_max"),
     "keyframes",
-    *_named("experience_map", "experiences", "links", "closures_rejected_by_grid_cells"),
+    *_named("experience_map", "experiences", "links", "links_withdrawn", "closures_rejected_by_grid_cells"),
     "hebbian_bytes",
     "objects",
     "moving_objects",
