@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from hypothesis import given
+from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from neoslam.mapping.cell_lineage import CellLineage
@@ -21,6 +21,7 @@ def made_every(metres: list[float]) -> CellLineage:
     return lineage
 
 
+@settings(max_examples=100, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(st.floats(0.0, 100.0), min_size=1, max_size=30), st.floats(0.0, 50.0), st.data())
 def test_without_a_recall_the_chain_is_the_travel_since_the_experience_was_made(metres, since, data) -> None:
     lineage = made_every(metres)

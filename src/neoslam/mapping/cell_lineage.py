@@ -17,7 +17,11 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["CellLineage"]
+import numpy as np
+
+from neoslam.config import ExperienceMapConfig
+
+__all__ = ["CellLineage", "allowed_cell_distance"]
 
 ROOT = -1  # the cells' starting state
 
@@ -79,3 +83,21 @@ class CellLineage:
             metres += self._metres[node]
             node = self._parent[node]
         return math.inf
+
+
+def allowed_cell_distance(
+    config: ExperienceMapConfig, grid_dims: np.ndarray, lineage: CellLineage, experience: int
+) -> float:
+    """The paper's guard, gc_distance_threshold cells; the drift gate adds gc_drift_cells_per_100m for every 100 m
+    of path integration between the cells now and the stored experience's cells, along the chain of anchors they
+    were derived from. Right after a recall at the candidate's neighbour it is the paper's check; after a long loop,
+    or after a recall at a place made long after the candidate, it admits the drift the odometry may have gathered
+    along the chain. A chain longer than the grid can tell apart (the allowed distance beyond the farthest cells)
+    opens the gate."""
+    threshold = config.gc_distance_threshold
+    rate = config.gc_drift_cells_per_100m
+    if config.closure_gate != "drift" or rate == 0:
+        return threshold
+    farthest = float(np.linalg.norm(np.asarray(grid_dims, dtype=float) / 2.0))
+    limit = 100.0 * max(farthest - threshold, 0.0) / rate
+    return threshold + rate * lineage.chain_metres(experience, limit) / 100.0

@@ -44,7 +44,7 @@ import numpy as np
 from neoslam.config import ExperienceMapConfig
 from neoslam.geometry import invert_pose, rotation_angle, yaw_of
 from neoslam.mapping.backend import MapBackend
-from neoslam.mapping.cell_lineage import CellLineage
+from neoslam.mapping.cell_lineage import CellLineage, allowed_cell_distance
 from neoslam.mapping.graph import MapGraph
 from neoslam.mapping.parts import MapParts
 from neoslam.types import Experience, Link, LoopClosure, MapState, Trajectory
@@ -285,22 +285,7 @@ class ExperienceMap:
         if self.config.closure_gate == "none" or self.experiences[experience].session != self.session:
             return True
         distance = np.linalg.norm(_circular(cells.grid, self.experiences[experience].grid_cell, self.grid_dims))
-        return bool(distance <= self._allowed_cell_distance(experience))
-
-    def _allowed_cell_distance(self, experience: int) -> float:
-        """The paper's guard, gc_distance_threshold cells; the drift gate adds gc_drift_cells_per_100m for every
-        100 m of path integration between the cells now and the stored experience's cells, along the chain of
-        anchors they were derived from (CellLineage). Right after a recall at the candidate's neighbour it is the
-        paper's check; after a long loop, or after a recall at a place made long after the candidate, it admits
-        the drift the odometry may have gathered along the chain. A chain longer than the grid can tell apart
-        (the allowed distance beyond the farthest cells) opens the gate."""
-        threshold = self.config.gc_distance_threshold
-        rate = self.config.gc_drift_cells_per_100m
-        if self.config.closure_gate != "drift" or rate == 0:
-            return threshold
-        farthest = float(np.linalg.norm(self.grid_dims / 2.0))
-        limit = 100.0 * max(farthest - threshold, 0.0) / rate
-        return threshold + rate * self.lineage.chain_metres(experience, limit) / 100.0
+        return bool(distance <= allowed_cell_distance(self.config, self.grid_dims, self.lineage, experience))
 
     def recalled(self, experience: int, cells: CellState, recalled: CellState) -> None:
         """A recall injected a stored experience's cell state, moved to where the robot is (`recalled`): if the
