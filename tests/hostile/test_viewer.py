@@ -38,7 +38,9 @@ pytestmark = [
     pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals, a shell script as the viewer"),
 ]
 
-FRAMES = 1000  # the town route's first 1000 frames: 10 s or more of run, whatever the machine
+# The town route's first FRAMES frames: over 15 s of run at 150 frames a second (an idle 2-core machine), so that a
+# signal STALL_S + 2 s after a tenth of them, or a viewer given up STALL_S after then, finds the run still going.
+FRAMES = 2500
 VIEWER_PORT = 9876  # where rerun-sdk's spawn() starts the viewer and connects
 PORT_WAIT_S = 600  # another session of these tests holds the port meanwhile
 RUN_LIMIT_S = 600  # a whole run on a loaded 2-core machine; a hang meets this instead
