@@ -38,3 +38,18 @@ def run_spec(spec: Spec, args: argparse.Namespace, measure=None) -> Iterator[Swe
         return
     with tempfile.TemporaryDirectory(prefix=f"{spec.name}-") as folder:
         yield run_sweep(spec, Path(folder) / "sweep", executor, progress=progress, measure=measure, environ={})
+
+
+def drive_runs(spec: Spec, args: argparse.Namespace, measure, name: str) -> list[dict]:
+    """Run a spec whose cells are drives: each drive's measurement with its sequence and seed, a failed cell
+    printed as one line; exits when no drive ran."""
+    runs = []
+    with run_spec(spec, args, measure=measure) as sweep:
+        for record in sweep.failed:
+            print(f"- failed: {record.cell.source} seed {record.cell.seed}: {record.error}")
+        for record in sweep.records:
+            if record.status == "ok":
+                runs.append({"sequence": record.cell.source, "seed": record.cell.seed, **dict(record.metrics)})
+    if not runs:
+        sys.exit(f"{name}: no drive ran (the errors above; tracebacks in the cells' error.txt)")
+    return runs

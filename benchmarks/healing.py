@@ -25,13 +25,12 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from benchmarks import harness
-from benchmarks._sweep import SPECS, run_spec, sweep_options, with_changes
+from benchmarks._sweep import SPECS, drive_runs, sweep_options, with_changes
 from benchmarks.harness import data_root
 from neoslam.config import NeoSLAMConfig
 from neoslam.datasets.simulated import read_dataset
@@ -189,15 +188,7 @@ def main(argv: list[str] | None = None) -> None:
         seeds=seeds,
         data_root=data_root(),
     )
-    runs = []
-    with run_spec(spec, args, measure=measure) as sweep:
-        for record in sweep.failed:
-            print(f"- failed: {record.cell.source} seed {record.cell.seed}: {record.error}")
-        for record in sweep.records:
-            if record.status == "ok":
-                runs.append({"sequence": record.cell.source, "seed": record.cell.seed, **dict(record.metrics)})
-    if not runs:
-        sys.exit("healing: no drive ran (the errors above; tracebacks in the cells' error.txt)")
+    runs = drive_runs(spec, args, measure, "healing")
     rows = tables(runs)
     profile = f"odometry {args.profile}, `real` profile, seeds {seeds}"
     print(f"## One wrong closure injected into simulated drives: {profile}\n")

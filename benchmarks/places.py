@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
 import time
 from collections import Counter
 from pathlib import Path
@@ -40,7 +39,7 @@ import numpy as np
 
 from benchmarks import harness
 from benchmarks._loop_misses import CLASSES, replay
-from benchmarks._sweep import SPECS, run_spec, sweep_options, with_changes
+from benchmarks._sweep import SPECS, drive_runs, sweep_options, with_changes
 from benchmarks.harness import data_root
 from neoslam.config import NeoSLAMConfig, load_config
 from neoslam.datasets.simulated import read_dataset
@@ -267,15 +266,7 @@ def main(argv: list[str] | None = None) -> None:
         data_root=data_root(),
         **changes,
     )
-    runs = []
-    with run_spec(spec, args, measure=measure) as sweep:
-        for record in sweep.failed:
-            print(f"- failed: {record.cell.source} seed {record.cell.seed}: {record.error}")
-        for record in sweep.records:
-            if record.status == "ok":
-                runs.append({"sequence": record.cell.source, "seed": record.cell.seed, **dict(record.metrics)})
-    if not runs:
-        sys.exit("places: no drive ran (the errors above; tracebacks in the cells' error.txt)")
+    runs = drive_runs(spec, args, measure, "places")
     base = load_config(args.config, environ={})
     out = tables(runs)
     street = f"{args.moving:.0%} of objects moving" if args.moving else "static streets"
