@@ -43,7 +43,7 @@ def sweep(
     from neoslam.sweep import load_spec, make_executor, run_sweep
 
     def kept_cells() -> str | None:
-        if any((out / "cells").glob("*/metrics.json")):
+        if any(not p.parent.name.startswith(".") for p in (out / "cells").glob("*/metrics.json")):  # staging: hidden
             return f"the finished cells are kept in {out}/cells: run the same command to resume"
         return None
 
