@@ -16,6 +16,7 @@ Ground truth chooses the wrong place and judges; the pipeline never reads it. Ta
 withdrawn, its ATE within 5 % of the clean run's, no true closure withdrawn.
 
     python -m benchmarks.healing [--quick] [--seeds 1 2 3] [--sequences 00 05 06 town] [--profile vo|heavy]
+                                 [--config FILE.yaml]
                                  [--workers N] [--out FILE] [--sweep-dir DIR] [--ray ADDRESS]
 
 Default: KITTI 00, 05, 06 and the town route, seeds 1-3, `vo` (12 drives, 36 runs, about 25 min on 2 cores).
@@ -173,6 +174,7 @@ def arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds", type=int, nargs="+", help=f"simulation seeds (default {SEEDS})")
     parser.add_argument("--sequences", nargs="+", help=f"drives (default {' '.join(SEQUENCES)})")
     parser.add_argument("--profile", default="vo", help="odometry noise profile (default vo)")
+    parser.add_argument("--config", type=Path, help="a NeoSLAM config file (YAML) under every run")
     sweep_options(parser)
 
 
@@ -181,16 +183,19 @@ def main(argv: list[str] | None = None) -> None:
     args = run.args
     sequences = args.sequences or (["05"] if args.quick else SEQUENCES)
     seeds = args.seeds or (QUICK_SEEDS if args.quick else SEEDS)
+    changes = {"config": args.config.resolve()} if args.config is not None else {}
     spec = with_changes(
         load_spec(SPEC),
         sources=[{"route": n} if n == "town" else {"kitti": n} for n in sequences],
         noise=[args.profile],
         seeds=seeds,
         data_root=data_root(),
+        **changes,
     )
     runs = drive_runs(spec, args, measure, "healing")
     rows = tables(runs)
     profile = f"odometry {args.profile}, `real` profile, seeds {seeds}"
+    profile += f", config {args.config.name}" if args.config is not None else ""
     print(f"## One wrong closure injected into simulated drives: {profile}\n")
     print("Injections made and withdrawn; true closures the map withdrew (clean runs, injected runs); ATE RMSE (m,")
     print("SE(3)-aligned, medians) clean, healed and with the withdrawal off; the healed run's worst ATE ratio to its")

@@ -105,6 +105,7 @@ class NeoSLAM:
         self.detected_closures: list[LoopClosure] = []  # accepted by the loop-closure detector
         self.loop_closures: list[LoopClosure] = []  # and by the experience map's grid-cell check
         self._previous_odometry: np.ndarray | None = None
+        self._previous_time: float | None = None
         # What the API is given, checked as the CLI's files are.
         self._frame_order = FrameOrder(config.motion_limits, Frame)
         self._grid_position = np.zeros(3)  # decoded grid-cell position unwrapped over the torus, metres
@@ -138,6 +139,7 @@ class NeoSLAM:
         ValueError for a frame out of order or beyond `motion_limits` (nothing of it is taken)."""
         self._frame_order.check(frame)
         travelled_m = self._integrate_path(frame)  # 3.3: head-direction and grid cells
+        elapsed_s = self._elapsed(frame)
         odometry = frame.odometry_pose
         observations = self.moving_objects.static(frame, self.keyframes.window)  # beyond the paper: no movers
         keyframe = self.keyframes.add(frame.index, odometry, observations, travelled_m)  # 3.2
@@ -150,7 +152,8 @@ class NeoSLAM:
             closures = self._find_loops(frame.index, keyframe, odometry)
             cells = self._cell_state()  # relocalising in a stored map moves the cells to its frame
             revisit = self.experience_map.recognise(keyframe.id, closures, cells, odometry)
-        self.experience_map.step(frame.index, odometry, velocities, cells, travelled_m, keyframe_id, revisit)  # 3.6
+        self._weigh_odometry()  # beyond the paper: links by their time too, at the odometry noise estimated online
+        self.experience_map.step(frame.index, odometry, velocities, cells, travelled_m, keyframe_id, revisit, elapsed_s)
         if keyframe is not None:
             self._learn_object_vectors(keyframe)  # 3.4
             if revisit is None:
@@ -209,6 +212,17 @@ class NeoSLAM:
         self._grid_centre = centre
         self._previous_odometry = frame.odometry_pose
         return float(np.hypot(horizontal, vertical))  # the odometer counts reversing as travel too
+
+    def _elapsed(self, frame: Frame) -> float:
+        """Seconds since the previous frame (0 for the first)."""
+        previous, self._previous_time = self._previous_time, frame.timestamp
+        return 0.0 if previous is None else frame.timestamp - previous
+
+    def _weigh_odometry(self) -> None:
+        """The pose graph's odometry links grow uncertain with time too, at the noise the moving-object tracks allow
+        for (as stated, or raised by their online estimate): a robot that stands still or crawls drifts as well."""
+        if self.config.experience_map.odometry_weights == "estimated":
+            self.experience_map.backend.odometry_noise = self.moving_objects.odometry_noise()
 
     def _learn_object_vectors(self, keyframe: Keyframe) -> None:
         """Train the OVCN, one epoch per `keyframes_per_epoch` keyframes, for `epochs` epochs (paper 3.4)."""

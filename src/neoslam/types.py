@@ -174,6 +174,7 @@ class Link:
     relative: np.ndarray  # (4, 4)
     kind: LinkKind
     distance_m: float  # travelled along an odometry link (its uncertainty grows with it); 0 for a loop link
+    duration_s: float = 0.0  # the time an odometry link spans (its uncertainty grows with that too); 0 for a loop
 
 
 @dataclass(slots=True)

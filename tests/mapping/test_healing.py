@@ -20,11 +20,12 @@ STILL = CellState(np.zeros(3), 0.0)
 VELOCITIES = (np.array([1.0, 0.0, 0.0]), np.zeros(3))
 
 
-def two_lap_map(square, wrong: bool, **update) -> tuple[ExperienceMap, np.ndarray, int]:
+def two_lap_map(square, wrong: bool, noise=None, **update) -> tuple[ExperienceMap, np.ndarray, int]:
     """Two laps of the yaw-biased square; the second lap closes with the first at each corner (every 25 frames) at
     the true relative pose, and with `wrong` one closure (frame 140 onto frame 40) is 20 m off. The odometry model
-    is honest about the square's bias, every closure passes the gate. Returns the map, the truth and the wrong
-    link's index."""
+    is honest about the square's bias (or as `update` states it, with the odometry's `noise` per root second given
+    as the session's estimate; a frame a second), every closure passes the gate. Returns the map, the truth and the
+    wrong link's index."""
     config = ExperienceMapConfig(
         odometry_yaw_sigma_per_root_metre=0.01 * np.sqrt(square.step_m),
         odometry_sigma_per_root_metre=0.05 * np.sqrt(square.step_m),
@@ -32,6 +33,7 @@ def two_lap_map(square, wrong: bool, **update) -> tuple[ExperienceMap, np.ndarra
         reuse_places=False,
     ).model_copy(update=update)
     experience_map = ExperienceMap(config, (36, 36, 36), 36)
+    experience_map.backend.odometry_noise = noise
     truth = square.truth(laps=2)
     odometry = square.dead_reckoned(truth)
     wrong_link = -1
@@ -39,7 +41,7 @@ def two_lap_map(square, wrong: bool, **update) -> tuple[ExperienceMap, np.ndarra
     for frame, pose in enumerate(odometry):
         travelled = 0.0 if frame == 0 else float(np.linalg.norm(pose[:3, 3] - odometry[frame - 1][:3, 3]))
         keyframe = frame // KEYFRAME_EVERY if frame % KEYFRAME_EVERY == 0 else None
-        experience_map.step(frame, pose, VELOCITIES, STILL, travelled, keyframe)
+        experience_map.step(frame, pose, VELOCITIES, STILL, travelled, keyframe, elapsed_s=0.0 if frame == 0 else 1.0)
         if keyframe is None or frame < square.lap or (frame % square.side_nodes and frame != 140):
             continue
         matched = keyframe - per_lap
@@ -114,3 +116,19 @@ def test_the_worst_disagreeing_link_that_is_not_the_only_tie_is_chosen(loops, ex
 
 def test_withdraw_sigmas_zero_never_withdraws() -> None:
     assert disagreeing_link(chain_with_loops(), report_of((2, 50.0)), np.ones(4, dtype=bool), 0.0) is None
+
+
+def test_odometry_weighted_by_its_noise_per_second_keeps_the_true_closures(biased_square) -> None:
+    """The distance rates stated ten times too small: true closures disagree with the map and are withdrawn. With
+    the odometry's noise per root second (as the moving-object tracks estimate it) the links' time makes up for it."""
+    step = biased_square.step_m  # a frame a second: per root second, the honest rates per root metre times sqrt(step)
+    overconfident = {"odometry_yaw_sigma_per_root_metre": 0.001 * np.sqrt(step),
+                     "odometry_sigma_per_root_metre": 0.005 * np.sqrt(step)}  # fmt: skip
+    stated, _, _ = two_lap_map(biased_square, wrong=False, **overconfident)
+    estimated, truth, _ = two_lap_map(biased_square, wrong=False, noise=(0.01 * step, 0.05 * step), **overconfident)
+    clean, _, _ = two_lap_map(biased_square, wrong=False)
+    assert len(stated.withdrawn_links) > 0
+    assert estimated.withdrawn_links == []
+    assert trajectory_error(estimated, truth) == pytest.approx(trajectory_error(clean, truth), rel=1e-6)
+    odometry = [link for link in estimated.graph.links if link.kind == "odometry"]
+    assert {link.duration_s for link in odometry} == {float(KEYFRAME_EVERY)}

@@ -81,7 +81,7 @@ def test_round_trip_holds_every_part_of_the_map_exactly(tmp_path, growth, same_s
     # the file is SQLite any tool reads, with the format in its meta table
     with sqlite3.connect(f"file:{path}?mode=ro", uri=True) as raw:
         meta = dict(raw.execute("SELECT key, value FROM meta"))
-    assert meta["format"] == "neoslam-map" and meta["format_version"] == "4"
+    assert meta["format"] == "neoslam-map" and meta["format_version"] == "5"
     assert json.loads(meta["config"]) == CONFIG.model_dump(mode="json")
 
 
@@ -256,9 +256,9 @@ def edited(path: Path, key: str, value: str) -> None:
 def test_refuses_another_format_version_or_neoslam_version(tmp_path, growth, read_only):
     path = tmp_path / "map.neoslam"
     made(path, growth)
-    edited(path, "format_version", "3")  # before withdrawn loop links were kept
-    refused(path, "map format version 3; this NeoSLAM reads version 4", read_only=read_only)
-    edited(path, "format_version", "4")
+    edited(path, "format_version", "4")  # before odometry links kept their duration
+    refused(path, "map format version 4; this NeoSLAM reads version 5", read_only=read_only)
+    edited(path, "format_version", "5")
     edited(path, "neoslam_version", "0.0.1")
     error = refused(path, "made by NeoSLAM 0.0.1; this is NeoSLAM ", read_only=read_only)
     assert map_file_module.__version__ in error.problem

@@ -133,6 +133,14 @@ CORRUPTIONS: dict[str, tuple[Callable[[Path], None], str]] = {
         sql("UPDATE links SET target = 99999 WHERE id = 3"),
         "table links, row id 3: target is 99999, outside 0 .. 18",
     ),
+    "link that spans negative time": (
+        sql("UPDATE links SET duration_s = -0.5 WHERE id = 3"),
+        "table links, row id 3: duration_s is -0.5: a link spans no negative time",
+    ),
+    "link whose duration is text": (
+        sql("UPDATE links SET duration_s = 'long' WHERE id = 3"),
+        "table links, row id 3: duration_s is the text 'long', not a number",
+    ),
     "withdrawn link that is an odometry link": (
         sql("INSERT INTO withdrawn_links (link) VALUES (0)"),
         "table withdrawn_links, row link 0: names an odometry link: only loop links are withdrawn",
@@ -178,16 +186,16 @@ CORRUPTIONS: dict[str, tuple[Callable[[Path], None], str]] = {
     ),
     "a table missing": (sql("DROP TABLE links"), "corrupt map file (no table links)"),
     "another format version in the header": (
-        sql("PRAGMA user_version = 5"),
-        "map format version 5 (a newer NeoSLAM's) in its header's user_version; this NeoSLAM reads version 4",
+        sql("PRAGMA user_version = 6"),
+        "map format version 6 (a newer NeoSLAM's) in its header's user_version; this NeoSLAM reads version 5",
     ),
     "an older format version in the header": (
-        sql("PRAGMA user_version = 3"),
-        "map format version 3 in its header's user_version; this NeoSLAM reads version 4",
+        sql("PRAGMA user_version = 4"),
+        "map format version 4 in its header's user_version; this NeoSLAM reads version 5",
     ),
     "no user_version": (
         sql("PRAGMA user_version = 0"),
-        "a SQLite database but not a NeoSLAM map (its header's user_version is 0; a map's is its format version, 4)",
+        "a SQLite database but not a NeoSLAM map (its header's user_version is 0; a map's is its format version, 5)",
     ),
 }
 

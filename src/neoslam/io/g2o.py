@@ -8,7 +8,8 @@ FIX 0                                                          the first experie
 ```
 
 The information is diag(1 / sigma^2) of the sigmas the pose-graph back end gives the link
-(`mapping.pose_graph.link_sigmas`: odometry links by the distance travelled, loop links by the closure's accuracy),
+(`mapping.pose_graph.link_sigmas`: odometry links by the distance and time travelled, loop links by the closure's
+accuracy),
 in g2o's order: translation x, y, z, then rotation. The rotation block is per radian of rotation vector, as GTSAM's
 readG2o and writeG2o take it (g2o itself measures the rotation error by the quaternion's vector part, half the
 angle, so strictly its information would be four times larger). The robust kernel of loop links has no place in
@@ -39,9 +40,10 @@ def _pose_numbers(pose: np.ndarray) -> str:
     return _numbers((*pose[:3, 3], *quaternion_from_pose(pose[None])[0]))
 
 
-def link_information(link, config) -> np.ndarray:
-    """The 6x6 information matrix of a link in g2o's order (x, y, z, roll, pitch, yaw)."""
-    sigmas = link_sigmas(link, config)[_G2O_FROM_GTSAM_ORDER]
+def link_information(link, config, noise=None) -> np.ndarray:
+    """The 6x6 information matrix of a link in g2o's order (x, y, z, roll, pitch, yaw); `noise`: the odometry's per
+    root second the back end weighs links with (None: by distance only)."""
+    sigmas = link_sigmas(link, config, noise)[_G2O_FROM_GTSAM_ORDER]
     return np.diag(1.0 / sigmas**2)
 
 
@@ -52,7 +54,7 @@ def write_g2o(path: Path, experience_map) -> None:
     rows, cols = np.triu_indices(6)
     lines = [f"VERTEX_SE3:QUAT {index} {_pose_numbers(pose)}" for index, pose in enumerate(graph.poses)]
     for link in graph.live_links():
-        information = link_information(link, experience_map.config)[rows, cols]
+        information = link_information(link, experience_map.config, experience_map.backend.odometry_noise)[rows, cols]
         lines.append(
             f"EDGE_SE3:QUAT {link.source} {link.target} {_pose_numbers(link.relative)} {_numbers(information)}"
         )

@@ -115,6 +115,7 @@ def write_experience_map(path: Path, experience_map) -> None:
             "target": k.target,
             "kind": k.kind,
             "distance_m": round(k.distance_m, 4),
+            "duration_s": round(k.duration_s, 4),
             "relative": _pose_record(k.relative),
             "withdrawn": index in withdrawn,
         }  # fmt: skip

@@ -6,7 +6,9 @@ whenever the robot leaves an experience (its observation sums are then complete)
 Only the robot's part of the map is corrected: a stored session not joined yet stays as stored (neoslam.store).
 Each pose-graph optimisation re-checks every loop link of that part (`withdraw_sigmas`): the one the optimised map
 disagrees with most, beyond that many standard deviations, is withdrawn and the part solved again without it, until
-every loop link agrees (a map that heals from a wrong closure; neoslam.mapping.healing).
+every loop link agrees (a map that heals from a wrong closure; neoslam.mapping.healing). Odometry links are
+weighted by the metres and, with `odometry_noise` given (the noise the session estimates online, per root second),
+the seconds they span.
 The back end keeps the links' measurements (relaxation) and the landmark solver; the experience map owns the graph.
 """
 
@@ -23,7 +25,7 @@ from neoslam.mapping.graph import MapGraph
 from neoslam.mapping.healing import disagreeing_link
 from neoslam.mapping.landmarks import LOOP_ITERATIONS, LandmarkSolver, ObservationSource
 from neoslam.mapping.parts import MapParts
-from neoslam.mapping.pose_graph import PoseGraphReport, optimise_pose_graph
+from neoslam.mapping.pose_graph import OdometryNoise, PoseGraphReport, optimise_pose_graph
 from neoslam.mapping.relaxation import LinkMeasurement, link_measurement, relax
 from neoslam.types import Link
 
@@ -57,6 +59,7 @@ class MapBackend:
     def __init__(self, config: ExperienceMapConfig) -> None:
         self.config = config
         self.landmark_source: ObservationSource | None = None  # the object map, for object_landmarks
+        self.odometry_noise: OdometryNoise | None = None  # per root second; None: links weighted by distance only
         self.seconds = 0.0  # wall time in the pose-graph solvers (timing only: never read by the map)
         self._measurements: list[LinkMeasurement] = []
         self._landmarks: LandmarkSolver | None = None  # built on first use, rebuilt after a restore or a join
@@ -138,7 +141,7 @@ class MapBackend:
     def _solve_part(self, graph: MapGraph, part: np.ndarray) -> PoseGraphReport:
         """One pose-graph solve of the experiences in `part`, its report's link indices into graph.links."""
         if part.all():
-            return optimise_pose_graph(graph, self.config)
+            return optimise_pose_graph(graph, self.config, self.odometry_noise)
         nodes = np.flatnonzero(part)
         renumbered = np.full(len(part), -1)
         renumbered[nodes] = np.arange(len(nodes))  # the part's first node, its frame's anchor, becomes node 0
@@ -149,7 +152,7 @@ class MapBackend:
             for index in indices
         ]  # fmt: skip
         piece = MapGraph(graph.poses[nodes].copy(), links)
-        report = optimise_pose_graph(piece, self.config)
+        report = optimise_pose_graph(piece, self.config, self.odometry_noise)
         graph.poses[nodes] = piece.poses
         loops = tuple(replace(loop, link_index=indices[loop.link_index]) for loop in report.loops)
         return replace(report, loops=loops)
@@ -174,5 +177,6 @@ class MapBackend:
             left = np.unique(experience_map.visited_experiences()[self._solved_visit : visits - 1])
         current = -1 if final else experience_map.current
         self._landmarks.odometer, self._landmarks.localised = experience_map.odometer, experience_map.localised
+        self._landmarks.odometry_noise = self.odometry_noise
         self._landmarks.update(graph, parts.members(part), self.landmark_source, left, current, iterations)
         self._solved_visit = visits - 1

@@ -107,6 +107,7 @@ class ExperienceMap:
         self._visit_anchors = np.zeros((INITIAL_VISITS, 4, 4))  # per visit: its anchor
         self._frame_visit = array("l")  # the visit of every frame
         self._travelled_since = 0.0
+        self._seconds_since = 0.0
         self._odometer = 0.0
         self._localised_at = -np.inf  # odometer reading of the last recognised place
         self.lineage = CellLineage()  # where each experience's cells came from (closure gate: drift)
@@ -147,11 +148,13 @@ class ExperienceMap:
         return self.config.mu_gc * grid_distance + self.config.mu_hdc * heading
 
     def step(self, frame_index: int, odometry_pose: np.ndarray, velocities, cells: CellState, travelled_m: float,
-             keyframe_id: int | None, revisit: Revisit | None = None) -> None:  # fmt: skip
-        """Record one frame: a new experience for a new keyframe, or when the cells left the current one; with a
-        revisit (see `recognise`), re-enter the stored keyframe's experience instead; when the cells move on while
-        the robot knows where it is, re-enter an experience at the corrected pose if there is one."""
+             keyframe_id: int | None, revisit: Revisit | None = None, elapsed_s: float = 0.0) -> None:  # fmt: skip
+        """Record one frame (`elapsed_s` after the previous one): a new experience for a new keyframe, or when the
+        cells left the current one; with a revisit (see `recognise`), re-enter the stored keyframe's experience
+        instead; when the cells move on while the robot knows where it is, re-enter an experience at the corrected
+        pose if there is one."""
         self._travelled_since += travelled_m
+        self._seconds_since += elapsed_s
         self._odometer += travelled_m
         self.lineage.travelled(travelled_m)
         if revisit is not None:
@@ -178,7 +181,7 @@ class ExperienceMap:
         self._visit_anchors = _grown(self._visit_anchors, self.visits + 1)
         self._visit_anchors[self.visits] = anchor
         self._visit_experience.append(experience)
-        self._travelled_since = 0.0
+        self._travelled_since = self._seconds_since = 0.0
 
     def _create(self, frame_index, odometry_pose, velocities, cells: CellState, keyframe_id) -> None:
         previous = self.current
@@ -197,7 +200,7 @@ class ExperienceMap:
         if previous >= 0:  # place it where the odometry says, relative to the corrected previous experience
             relative = invert_pose(self._anchor) @ odometry_pose
             self.graph.add_node(self.graph.poses[previous] @ relative)
-            self._link(Link(previous, experience.id, relative, "odometry", self._travelled_since))
+            self._link(Link(previous, experience.id, relative, "odometry", self._travelled_since, self._seconds_since))
         else:
             self.graph.add_node(odometry_pose.copy())
         self.experiences.append(experience)

@@ -46,7 +46,7 @@ import numpy as np
 from neoslam.config import ExperienceMapConfig, ObjectMapConfig
 from neoslam.loop.keyframes import footprint_radii
 from neoslam.mapping.graph import MapGraph
-from neoslam.mapping.pose_graph import ANCHOR_SIGMA, link_noise_model, poses_from_values
+from neoslam.mapping.pose_graph import ANCHOR_SIGMA, OdometryNoise, link_noise_model, poses_from_values
 from neoslam.types import ObjectMapState
 
 __all__ = ["LOOP_ITERATIONS", "LandmarkSolver", "ObservationSource", "landmark_key"]
@@ -93,6 +93,7 @@ class LandmarkSolver:
         self._first_seen: dict[int, float] = {}  # odometer reading when each landmark got its first factor, m
         self.odometer = 0.0  # the robot's odometer (m) and whether it knows where it is: set before an update
         self.localised = True
+        self.odometry_noise: OdometryNoise | None = None  # per root second, for the links added next (link_sigmas)
 
     @property
     def nodes(self) -> np.ndarray:
@@ -158,7 +159,7 @@ class LandmarkSolver:
             if index in withdrawn:
                 continue
             if link.source in inside and link.target in inside:  # a link always ties one part: both or neither
-                noise = link_noise_model(link, self.config)
+                noise = link_noise_model(link, self.config, self.odometry_noise)
                 factors.add(gtsam.BetweenFactorPose3(link.source, link.target, gtsam.Pose3(link.relative), noise))
         self._links = len(graph.links)
 

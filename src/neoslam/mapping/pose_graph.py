@@ -1,9 +1,9 @@
 """Pose-graph back end: corrects the experience map by nonlinear least squares (GTSAM), beyond the paper.
 
 The paper (3.6, eq. 18) relaxes the map by nudging linked experiences towards each other. This back end instead
-solves for all poses at once: one Pose3 per experience, a between-factor per link, weighted by how far the robot
-travelled (odometry) or by the closure's accuracy (loop), and a robust kernel on the loop links so that one wrong
-closure cannot bend the whole map.
+solves for all poses at once: one Pose3 per experience, a between-factor per link, weighted by how far and how long
+the robot travelled (odometry) or by the closure's accuracy (loop), and a robust kernel on the loop links so that one
+wrong closure cannot bend the whole map.
 """
 
 from __future__ import annotations
@@ -19,12 +19,15 @@ from neoslam.types import Link
 
 __all__ = [
     "LoopResidual",
+    "OdometryNoise",
     "PoseGraphReport",
     "link_noise_model",
     "link_sigmas",
     "optimise_pose_graph",
     "poses_from_values",
 ]
+
+OdometryNoise = tuple[float, float]  # heading (rad) and position (m) random walks per root second
 
 # Roll and pitch are observable from gravity, so links hold them tightly whatever the distance travelled.
 ROLL_PITCH_SIGMA_RAD = 0.01
@@ -75,12 +78,15 @@ class PoseGraphReport:
         return tuple(loop.link_index for loop in self.loops if loop.is_outlier)
 
 
-def optimise_pose_graph(graph: MapGraph, config: ExperienceMapConfig) -> PoseGraphReport:
-    """Correct graph.poses in place by Levenberg-Marquardt over the links in use; node 0 stays where it is."""
+def optimise_pose_graph(
+    graph: MapGraph, config: ExperienceMapConfig, noise: OdometryNoise | None = None
+) -> PoseGraphReport:
+    """Correct graph.poses in place by Levenberg-Marquardt over the links in use; node 0 stays where it is. `noise`:
+    the odometry's per root second (see link_sigmas)."""
     if len(graph) == 0:
         return PoseGraphReport(iterations=0, initial_error=0.0, final_error=0.0, loops=())
     live = graph.live()
-    factors, sigmas = _build_factors(graph, live, config)
+    factors, sigmas = _build_factors(graph, live, config, noise)
     initial = _initial_values(graph.poses)
     optimiser = gtsam.LevenbergMarquardtOptimizer(factors, initial, _lm_parameters())
     result = optimiser.optimize()
@@ -94,7 +100,7 @@ def optimise_pose_graph(graph: MapGraph, config: ExperienceMapConfig) -> PoseGra
 
 
 def _build_factors(
-    graph: MapGraph, live: list[int], config: ExperienceMapConfig
+    graph: MapGraph, live: list[int], config: ExperienceMapConfig, noise: OdometryNoise | None
 ) -> tuple[gtsam.NonlinearFactorGraph, np.ndarray]:
     """The factor graph (anchor prior at index 0, then one between-factor per link in use, `live`) and each such
     link's sigmas."""
@@ -102,15 +108,17 @@ def _build_factors(
     anchor_noise = gtsam.noiseModel.Isotropic.Sigma(6, ANCHOR_SIGMA)
     factors.add(gtsam.PriorFactorPose3(0, gtsam.Pose3(graph.poses[0]), anchor_noise))
     links = [graph.links[index] for index in live]
-    sigmas = np.array([link_sigmas(link, config) for link in links]).reshape(-1, 6)
+    sigmas = np.array([link_sigmas(link, config, noise) for link in links]).reshape(-1, 6)
     for link, link_sigma in zip(links, sigmas, strict=True):
-        noise = _noise_model(link, link_sigma, config)
-        factors.add(gtsam.BetweenFactorPose3(link.source, link.target, gtsam.Pose3(link.relative), noise))
+        model = _noise_model(link, link_sigma, config)
+        factors.add(gtsam.BetweenFactorPose3(link.source, link.target, gtsam.Pose3(link.relative), model))
     return factors, sigmas
 
 
-def link_sigmas(link: Link, config: ExperienceMapConfig) -> np.ndarray:
-    """Standard deviations of a link in GTSAM's tangent order (roll, pitch, yaw, x, y, z)."""
+def link_sigmas(link: Link, config: ExperienceMapConfig, noise: OdometryNoise | None = None) -> np.ndarray:
+    """Standard deviations of a link in GTSAM's tangent order (roll, pitch, yaw, x, y, z). An odometry link's grow
+    with the metres it spans at the configured rates and, given the odometry's `noise` (heading rad, position m per
+    root second), with its seconds at those: whichever is larger (a robot that stands still drifts too)."""
     sigmas = np.empty(6)
     sigmas[_ROTATION] = ROLL_PITCH_SIGMA_RAD
     if link.kind == "loop":
@@ -120,12 +128,18 @@ def link_sigmas(link: Link, config: ExperienceMapConfig) -> np.ndarray:
         root = np.sqrt(link.distance_m)
         sigmas[_YAW] = max(ODOMETRY_YAW_SIGMA_FLOOR_RAD, config.odometry_yaw_sigma_per_root_metre * root)
         sigmas[_TRANSLATION] = max(config.odometry_sigma_floor, config.odometry_sigma_per_root_metre * root)
+        if noise is not None:
+            root_s = np.sqrt(link.duration_s)
+            sigmas[_YAW] = max(sigmas[_YAW], noise[0] * root_s)
+            sigmas[_TRANSLATION] = np.maximum(sigmas[_TRANSLATION], noise[1] * root_s)
     return sigmas
 
 
-def link_noise_model(link: Link, config: ExperienceMapConfig) -> gtsam.noiseModel.Base:
+def link_noise_model(
+    link: Link, config: ExperienceMapConfig, noise: OdometryNoise | None = None
+) -> gtsam.noiseModel.Base:
     """The noise model of a link's between-factor: its sigmas (see link_sigmas), a robust kernel on a loop link."""
-    return _noise_model(link, link_sigmas(link, config), config)
+    return _noise_model(link, link_sigmas(link, config, noise), config)
 
 
 def _noise_model(link: Link, sigmas: np.ndarray, config: ExperienceMapConfig) -> gtsam.noiseModel.Base:

@@ -6,7 +6,7 @@ last one), so that a killed run leaves the map up to its last committed keyframe
 `close` folds the log back and leaves one self-contained file. The same commits give the same file, byte for byte:
 nothing in it depends on the clock.
 
-Format (format_version 4). Every array is a BLOB of little-endian raw bytes: float64 (`<f8`) unless said otherwise,
+Format (format_version 5). Every array is a BLOB of little-endian raw bytes: float64 (`<f8`) unless said otherwise,
 of the shape its column fixes or its row's columns give. Ids are the map's own: keyframe, experience and object ids;
 links, closures and OVCN losses are numbered by their position in the map's lists.
 
@@ -17,7 +17,7 @@ links, closures and OVCN losses are numbered by their position in the map's list
 | `keyframes` | `id`, `frame`, `experience` (null: none), `pose` (4x4), `objects` (n), `centers` (n x 3), `labels` (JSON list of n strings), `patch_height`, `patch_width`, `patches` (n x h x w uint8), `provisional` (n uint8, 1: an object not known to be static yet), `covariances` (n x 2 x 2: each centre's ground-plane covariance from its views, m²) |
 | `experiences` | `id`, `session`, `frame`, `grid_cell` (3), `head_direction` (real, cells), `odometry_pose` (4x4), `linear_velocity` (3), `angular_velocity` (3), `keyframe` (null: none) |
 | `experience_poses` | `block`, `poses` (k x 4 x 4): the corrected poses, map frame, of experiences 30·block to 30·block + k - 1 (k = 30 but in the last block); blocks, not a row per experience, since a correction moves every pose: 1500 experiences are 50 rows of one page each |
-| `links` | `id`, `source`, `target` (experiences), `relative` (4x4, T_source_target), `kind` (`odometry` or `loop`), `distance_m` |
+| `links` | `id`, `source`, `target` (experiences), `relative` (4x4, T_source_target), `kind` (`odometry` or `loop`), `distance_m`, `duration_s` (travelled and elapsed along an odometry link; 0 for a loop link) |
 | `withdrawn_links` | `link` (a loop link's id): links withdrawn because the optimised map disagreed with them (neoslam.mapping.healing); they stay in `links`, out of the map |
 | `closures` | `id`, `session`, `match_session`, `query_frame`, `match_frame`, `query_keyframe`, `match_keyframe`, `score`, `n_matches`, `relative_pose` (4x4, T_match_query) |
 | `objects` | `id`, `label`, `sums` (3, weighted world sums), `weight`, `count` (0: merged away or forgotten) |

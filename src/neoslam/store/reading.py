@@ -303,13 +303,15 @@ def _read_experiences(rows, state: MapState, sessions: set[int]) -> None:
 def _read_graph(rows, state: MapState, sessions: set[int]) -> None:
     last = len(state.experiences) - 1
     check = _Row("links")
-    for position, (link_id, source, target, relative, kind, distance) in enumerate(
+    for position, (link_id, source, target, relative, kind, distance, duration) in enumerate(
         rows(f"SELECT {columns('links')} FROM links ORDER BY id")
     ):
         check.at(id=link_id)
         _check_position(check, link_id, position)
         if kind not in ("odometry", "loop"):
             check.fail(f"kind is {_kind(kind)}, not 'odometry' or 'loop'")
+        if check.real(duration, "duration_s") < 0:
+            check.fail(f"duration_s is {duration}: a link spans no negative time")
         state.links.append(
             Link(
                 check.integer(source, "source", 0, last),
@@ -317,6 +319,7 @@ def _read_graph(rows, state: MapState, sessions: set[int]) -> None:
                 check.array(relative, F8, POSE, "relative"),
                 kind,
                 check.real(distance, "distance_m"),
+                float(duration),
             )
         )
     check = _Row("withdrawn_links")

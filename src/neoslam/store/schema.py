@@ -59,7 +59,7 @@ __all__ = [
 ]
 
 FORMAT_TAG = "neoslam-map"
-FORMAT_VERSION = 4
+FORMAT_VERSION = 5
 APPLICATION_ID = 0x4E534C4D  # "NSLM" at offset 68 of the file header, so that `file` and others can tell a map
 
 F8 = np.dtype("<f8")
@@ -94,7 +94,8 @@ TABLES: dict[str, str] = {
     "experience_poses": "CREATE TABLE experience_poses (block INTEGER PRIMARY KEY, poses BLOB NOT NULL)",
     "links": (
         "CREATE TABLE links (id INTEGER PRIMARY KEY, source INTEGER NOT NULL, target INTEGER NOT NULL, "
-        "relative BLOB NOT NULL, kind TEXT NOT NULL CHECK (kind IN ('odometry', 'loop')), distance_m REAL NOT NULL)"
+        "relative BLOB NOT NULL, kind TEXT NOT NULL CHECK (kind IN ('odometry', 'loop')), distance_m REAL NOT NULL, "
+        "duration_s REAL NOT NULL)"
     ),
     "withdrawn_links": "CREATE TABLE withdrawn_links (link INTEGER PRIMARY KEY)",
     "closures": (
@@ -241,7 +242,8 @@ STATEMENTS = {
     "linear_velocity, angular_velocity, keyframe) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
     "poses": "INSERT INTO experience_poses (block, poses) VALUES (?, ?) ON CONFLICT (block) DO UPDATE SET "
     "poses = excluded.poses",
-    "link": "INSERT INTO links (id, source, target, relative, kind, distance_m) VALUES (?, ?, ?, ?, ?, ?)",
+    "link": "INSERT INTO links (id, source, target, relative, kind, distance_m, duration_s) "
+    "VALUES (?, ?, ?, ?, ?, ?, ?)",
     "withdrawn_link": "INSERT INTO withdrawn_links (link) VALUES (?)",
     "closure": "INSERT INTO closures (id, session, match_session, query_frame, match_frame, query_keyframe, "
     "match_keyframe, score, n_matches, relative_pose) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
@@ -306,7 +308,15 @@ def link_row(index: int, link: Link) -> tuple[Any, ...]:
     if link.kind not in ("odometry", "loop"):
         raise ValueError(f"link {index} is of kind {link.kind!r}, not 'odometry' or 'loop'")
     relative = encode(link.relative, F8, POSE, "a link")
-    return index, int(link.source), int(link.target), relative, link.kind, float(link.distance_m)
+    return (
+        index,
+        int(link.source),
+        int(link.target),
+        relative,
+        link.kind,
+        float(link.distance_m),
+        float(link.duration_s),
+    )
 
 
 def closure_row(index: int, stored: StoredClosure) -> tuple[Any, ...]:
