@@ -11,7 +11,7 @@ import pytest
 from neoslam.config import KeyframeConfig
 from neoslam.geometry import robot_points_to_camera, transform_points
 from neoslam.loop.keyframes import KeyframeBuilder, LocalObjectWindow
-from neoslam.types import ObjectObservation
+from neoslam.types import Keyframe, ObjectObservation
 
 POINT = "sign"  # a label without a footprint: its stereo centre is taken as is
 DEFAULTS = KeyframeConfig()
@@ -335,3 +335,10 @@ def test_a_keyframe_refuses_covariances_of_the_wrong_shape() -> None:
     assert keyframe is not None
     with pytest.raises(ValueError, match=r"covariances of shape \(8,\), not \(2, 2, 2\)"):
         replace(keyframe, covariances=keyframe.covariances.ravel())
+
+
+def test_keyframe_distances_are_those_of_numpys_norm() -> None:
+    rng = np.random.default_rng(0)
+    centres = rng.normal(0.0, 30.0, (40, 3))
+    keyframe = Keyframe(0, 0, np.eye(4), centres, ("car",) * 40, np.zeros((40, 16, 16), np.uint8))
+    assert np.array_equal(keyframe.distances, np.linalg.norm(centres[:, None] - centres[None], axis=-1))

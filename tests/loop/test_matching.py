@@ -8,10 +8,13 @@ import pytest
 from neoslam.config import KeyframeConfig, MatchingConfig
 from neoslam.geometry import fit_yaw_translation, invert_pose, transform_points, yaw_of
 from neoslam.loop.matching import (
+    KeyframeMatch,
     affinity_matrix,
     candidate_assignments,
     contradictions,
+    distance_variances,
     match_keyframes,
+    match_side,
     principal_eigenvector,
     spectral_matching,
 )
@@ -204,6 +207,38 @@ def test_a_permuted_moved_noisy_copy_is_matched(make_keyframe, make_street, make
     )
     assert match.residual_rms < 0.45
     assert match.n_matches == 8
+
+
+def _same_match(a: KeyframeMatch, b: KeyframeMatch) -> bool:
+    return all(np.array_equal(getattr(a, f), getattr(b, f)) for f in KeyframeMatch.__dataclass_fields__)
+
+
+@pytest.mark.parametrize("config", [TOLERANT, FIXED_TOLERANT], ids=["covariance", "fixed"])
+@pytest.mark.parametrize("seed", range(4))
+def test_a_match_of_prepared_sides_is_that_of_the_keyframes(make_keyframe, make_street, make_yaw_pose, config, seed):
+    rng = np.random.default_rng(seed)
+    street = make_street(rng, count=10, length=40.0)
+    stored = make_keyframe(street.centers, street.labels, street.patches(rng, range(10)), id=3)
+    motion = make_yaw_pose(np.radians(30.0 * seed), (250.0, -80.0, 1.0))
+    centres, labels, patches, _ = _query_of(street, rng, rng.choice(10, 8, replace=False), motion)
+    query = make_keyframe(centres, labels, patches, id=9)
+    plain = match_keyframes(query, stored, config, E_MAX)
+    prepared = match_keyframes(match_side(query, config), match_side(stored, config), config, E_MAX)
+    assert plain.verified and _same_match(plain, prepared)
+    # the affinity of prepared sides, bit for bit that of the formulas (eq. 2, 4) over np.ix_
+    candidates = candidate_assignments(query, stored, config)
+    q, s = candidates[:, 0], candidates[:, 1]
+    difference = np.abs(query.distances[np.ix_(q, q)] - stored.distances[np.ix_(s, s)])
+    if config.tolerances == "fixed":
+        expected = np.maximum(E_MAX - difference, 0.0)
+    else:
+        variance = distance_variances(query, config.centre_sigma)[np.ix_(q, q)]
+        variance += distance_variances(stored, config.centre_sigma)[np.ix_(s, s)]
+        tolerance = np.maximum(E_MAX, config.affinity_sigmas * np.sqrt(variance))
+        expected = E_MAX * np.maximum(1.0 - difference / tolerance, 0.0)
+    expected[(q[:, None] == q[None, :]) | (s[:, None] == s[None, :])] = 0.0
+    affinity = affinity_matrix(match_side(query, config), match_side(stored, config), candidates, E_MAX, config)
+    assert np.array_equal(affinity, expected)
 
 
 @pytest.mark.parametrize("seed", range(6))

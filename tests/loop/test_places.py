@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from neoslam.geometry import make_pose
 from neoslam.loop.index import StoredKeyframes
@@ -79,3 +80,44 @@ def test_a_place_is_kept_once_no_later_keyframe_can_join_it() -> None:
     assert cache.place(stored, 4).members == (2, 3, 4, 5)
     inner = cache.place(stored, 2)
     assert cache.place(stored, 2) is inner  # made once
+
+
+def _merged_by_rows(keyframes: list[Keyframe], anchor: Keyframe, association_radius: float) -> Keyframe:
+    """merge_keyframes as its docstring says it, object by object over rows of numpy: the reference."""
+    centers = np.concatenate([k.centers for k in keyframes])
+    labels = np.array([label for k in keyframes for label in k.labels])
+    covariances = np.concatenate([k.covariances for k in keyframes])
+    provisional = np.concatenate([k.provisional for k in keyframes])
+    order = np.argsort(np.trace(covariances, axis1=1, axis2=2), kind="stable")
+    distance = np.linalg.norm(centers[:, None, :2] - centers[None, :, :2], axis=2)
+    distance[labels[:, None] != labels[None, :]] = np.inf
+    standing, known, kept = np.zeros(len(labels), dtype=bool), ~provisional, []
+    for i in order:
+        near = np.where(standing, distance[i], np.inf)
+        j = int(np.argmin(near))
+        if near[j] <= association_radius:
+            known[j] |= not provisional[i]
+            continue
+        standing[i] = True
+        kept.append(int(i))
+    keep = np.array(kept, dtype=int)
+    patches = np.concatenate([k.patches for k in keyframes])[keep]
+    return Keyframe(anchor.id, anchor.frame_index, anchor.pose, centers[keep], tuple(labels[keep].tolist()), patches,
+                    ~known[keep], covariances[keep])  # fmt: skip
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_merge_is_the_object_by_object_one(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    keyframes = []
+    for i in range(6):  # a crowded street: many objects of few labels within the association radius of others
+        n = int(rng.integers(5, 15))
+        centres = np.column_stack([rng.uniform(0, 30, n), rng.uniform(-6, 6, n), rng.uniform(0, 2, n)])
+        labels = rng.choice(["car", "truck", "bicycle"], n).tolist()
+        keyframes.append(_keyframe(i, 5.0 * i, centres, labels, spread=float(rng.uniform(0.05, 1.0)),
+                                   provisional=rng.random(n) < 0.3))  # fmt: skip
+    merged = merge_keyframes(keyframes, keyframes[2], association_radius=2.5)
+    expected = _merged_by_rows(keyframes, keyframes[2], association_radius=2.5)
+    assert merged.labels == expected.labels
+    for field in ("centers", "patches", "provisional", "covariances", "distances", "pose"):
+        assert np.array_equal(getattr(merged, field), getattr(expected, field))

@@ -18,7 +18,7 @@ import numpy as np
 from neoslam.config import KeyframeConfig, MatchingConfig
 from neoslam.geometry import invert_pose, rotation_angle, transform_points
 from neoslam.loop.index import KeyframeIndex
-from neoslam.loop.matching import KeyframeMatch, match_keyframes
+from neoslam.loop.matching import KeyframeMatch, MatchSide, match_keyframes, match_side
 from neoslam.loop.places import Place, PlaceCache, merge_keyframes
 from neoslam.types import Keyframe, LoopClosure
 
@@ -73,7 +73,7 @@ class LoopClosureDetector:
         self._queried: deque[Keyframe] = deque(maxlen=QUERY_HISTORY)  # the last keyframes queried
         self._emitted: set[int] = set()
 
-    def _match(self, query: Keyframe, stored: Keyframe, tested: int = 1) -> KeyframeMatch:
+    def _match(self, query: Keyframe | MatchSide, stored: Keyframe | MatchSide, tested: int = 1) -> KeyframeMatch:
         return match_keyframes(query, stored, self.config, self.e_max, self.index.label_shares(), tested)
 
     def _place(self, keyframe_id: int, odometer_m: float) -> Place:
@@ -127,6 +127,7 @@ class LoopClosureDetector:
         query = self._query_window(keyframe)
         if not self._queried or self._queried[-1].id != keyframe.id:
             self._queried.append(keyframe)
+        side = match_side(query, self.config)  # the query's share of matching, once for all its candidates
         found: list[_Relocalisation] = []
         tried: set[int] = set()
         places = 0
@@ -142,7 +143,7 @@ class LoopClosureDetector:
                 self.config.min_shared_triangles
             ):
                 continue  # not one of its triangles: it cannot hold the query's place
-            relocalisation = self._relocalisation(query, place, eligible, odometer_m)
+            relocalisation = self._relocalisation(side, place, eligible, odometer_m)
             if relocalisation is not None:
                 found.append(relocalisation)
         return self._unambiguous(found)
@@ -165,12 +166,13 @@ class LoopClosureDetector:
         return merge_keyframes(members, keyframe, self.places.association_radius)
 
     def _relocalisation(
-        self, keyframe: Keyframe, place: Place, eligible: np.ndarray, odometer_m: float
+        self, query: MatchSide, place: Place, eligible: np.ndarray, odometer_m: float
     ) -> _Relocalisation | None:
-        """The keyframe relocalised in one place, or None when the match fails verification or puts the robot
+        """The query keyframe relocalised in one place, or None when the match fails verification or puts the robot
         too far from the place's keyframes, off its level, or turned more than the odometry can drift; `eligible`:
         the ids (increasing) of the stored keyframes it may close a loop with."""
-        match = self._match(keyframe, place.keyframe, len(eligible))
+        keyframe = query.keyframe
+        match = self._match(query, place.keyframe, len(eligible))
         members = np.asarray(place.members, dtype=int)
         found = np.minimum(np.searchsorted(eligible, members), max(len(eligible) - 1, 0))
         members = members[eligible[found] == members] if len(eligible) else members[:0]

@@ -14,6 +14,7 @@ the query window, loop.detector).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,40 +33,72 @@ class Place:
     members: tuple[int, ...]
 
 
+def _kept_objects(
+    distance: np.ndarray, order: np.ndarray, association_radius: float
+) -> tuple[list[int], list[tuple[int, int]]]:
+    """Objects taken in `order`: each joins the nearest object kept before it within `association_radius` (the
+    first of equally near ones), else is kept. Returns the kept objects in order taken, and the (joined, kept) pairs.
+    A loop over plain lists of each object's few neighbours: numpy's per-call cost over a row per object is most of
+    a place's merge."""
+    rows, columns = np.nonzero(distance <= association_radius)  # by row, then column: the first nearest wins ties
+    near = distance[rows, columns].tolist()
+    bounds = np.searchsorted(rows, np.arange(len(distance) + 1)).tolist()
+    columns = columns.tolist()
+    standing = [False] * len(distance)
+    kept: list[int] = []
+    absorbed: list[tuple[int, int]] = []
+    for i in order.tolist():
+        nearest, nearest_distance = -1, 0.0
+        for k in range(bounds[i], bounds[i + 1]):
+            j = columns[k]
+            if standing[j] and (nearest < 0 or near[k] < nearest_distance):
+                nearest, nearest_distance = j, near[k]
+        if nearest >= 0:
+            absorbed.append((i, nearest))
+            continue
+        standing[i] = True
+        kept.append(i)
+    return kept, absorbed
+
+
 def merge_keyframes(keyframes: list[Keyframe], anchor: Keyframe, association_radius: float) -> Keyframe:
     """One keyframe holding the objects of `keyframes` (one odometry frame), same-label objects within
     `association_radius` merged into the best-known of them; id and pose of `anchor`. A merged object is
     provisional only when every estimate of it is."""
     centers = np.concatenate([k.centers for k in keyframes])
-    labels = np.array([label for k in keyframes for label in k.labels])
+    labels = [label for k in keyframes for label in k.labels]
     covariances = np.concatenate([k.covariances for k in keyframes])
     patches = np.concatenate([k.patches for k in keyframes])
-    provisional = np.concatenate([k.provisional for k in keyframes])
+    provisional = np.concatenate([k.provisional for k in keyframes]).tolist()
     order = np.argsort(np.trace(covariances, axis1=1, axis2=2), kind="stable")  # the best-known first
-    distance = np.linalg.norm(centers[:, None, :2] - centers[None, :, :2], axis=2)
-    distance[labels[:, None] != labels[None, :]] = np.inf  # objects of two labels are never one
-    standing = np.zeros(len(labels), dtype=bool)  # the objects kept so far
-    known = ~provisional.copy()
-    kept: list[int] = []
-    for i in order:
-        near = np.where(standing, distance[i], np.inf)
-        j = int(np.argmin(near))
-        if near[j] <= association_radius:
-            known[j] |= not provisional[i]
-            continue
-        standing[i] = True
-        kept.append(int(i))
+    # np.linalg.norm over the ground plane written out, the same sums: many times faster
+    x, y = centers[:, 0], centers[:, 1]
+    dx, dy = x[:, None] - x, y[:, None] - y
+    distance = np.sqrt(dx * dx + dy * dy)
+    label_codes: dict[str, int] = {}
+    codes = np.array([label_codes.setdefault(label, len(label_codes)) for label in labels])
+    distance[codes[:, None] != codes[None, :]] = np.inf  # objects of two labels are never one
+    kept, absorbed = _kept_objects(distance, order, association_radius)
+    known = [not p for p in provisional]
+    for i, j in absorbed:
+        known[j] = known[j] or not provisional[i]
     keep = np.array(kept, dtype=int)
     return Keyframe(
         id=anchor.id,
         frame_index=anchor.frame_index,
         pose=anchor.pose,
         centers=centers[keep],
-        labels=tuple(labels[keep].tolist()),
+        labels=tuple(labels[i] for i in kept),
         patches=patches[keep],
-        provisional=~known[keep],
+        provisional=np.array([not known[i] for i in kept], dtype=bool),
         covariances=covariances[keep],
     )
+
+
+def _distance(a: np.ndarray, b: np.ndarray) -> float:
+    """|a - b|, the sums of np.linalg.norm without its per-call cost."""
+    offset = a - b
+    return math.sqrt(offset.dot(offset))
 
 
 class PlaceCache:
@@ -88,9 +121,9 @@ class PlaceCache:
             return cached
         first = last = slot
         position = anchor.pose[:2, 3]
-        while first > 0 and np.linalg.norm(stored.at(first - 1).pose[:2, 3] - position) <= self.radius:
+        while first > 0 and _distance(stored.at(first - 1).pose[:2, 3], position) <= self.radius:
             first -= 1
-        while last + 1 < len(stored) and np.linalg.norm(stored.at(last + 1).pose[:2, 3] - position) <= self.radius:
+        while last + 1 < len(stored) and _distance(stored.at(last + 1).pose[:2, 3], position) <= self.radius:
             last += 1
         members = [stored.at(i) for i in range(first, last + 1)]
         merged = anchor if len(members) == 1 else merge_keyframes(members, anchor, self.association_radius)
