@@ -73,7 +73,7 @@ class KeyframeMatch:
 @dataclass(frozen=True)
 class MatchSide:
     """What matching uses of one keyframe, worked out once for it: a query is matched against up to
-    `matching.candidates` places, and a cached place against many queries."""
+    `matching.candidates` places."""
 
     keyframe: Keyframe
     labels: np.ndarray  # (n,) str

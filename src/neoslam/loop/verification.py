@@ -79,9 +79,18 @@ def _yaw_rotation(yaw: float) -> np.ndarray:
 
 def pair_covariances(query_cov: np.ndarray, stored_cov: np.ndarray, yaw: float, centre_sigma: float) -> np.ndarray:
     """(k, 2, 2) covariance of each pair's ground-plane residual under a fit turned by `yaw`."""
+    return _pair_covariances(query_cov, stored_cov, yaw, _centre_floor(centre_sigma))
+
+
+def _centre_floor(centre_sigma: float) -> np.ndarray:
+    """(2, 2) what `centre_sigma` adds to a pair's covariance, both centres."""
+    return 2.0 * centre_sigma**2 * np.eye(2)
+
+
+def _pair_covariances(query_cov: np.ndarray, stored_cov: np.ndarray, yaw: float, floor: np.ndarray) -> np.ndarray:
     rotation = _yaw_rotation(yaw)
     turned = rotation @ query_cov @ rotation.T
-    return turned + stored_cov + 2.0 * centre_sigma**2 * np.eye(2)
+    return turned + stored_cov + floor
 
 
 class FitResult:
@@ -111,12 +120,14 @@ def fit_weighted(
     yaw = float(np.arctan2(start[1, 0], start[0, 0]))
     translation = start[:2, 3].copy()
     q, s = query[:, :2], stored[:, :2]
+    floor = _centre_floor(centre_sigma)
+    jacobian = np.empty((len(q), 2, 3))  # ∂r/∂(yaw, translation) for each pair: the translation's part is I
+    jacobian[:, :, 1:] = np.eye(2)
     for _ in range(GAUSS_NEWTON_STEPS):
-        weights = _inverse_2x2(pair_covariances(query_cov, stored_cov, yaw, centre_sigma))
+        weights = _inverse_2x2(_pair_covariances(query_cov, stored_cov, yaw, floor))
         residual = _residuals(q, s, yaw, translation)
         c, si = np.cos(yaw), np.sin(yaw)
-        d_yaw = q @ np.array([[-si, -c], [c, -si]]).T  # ∂r/∂yaw for each pair
-        jacobian = np.concatenate([d_yaw[:, :, None], np.broadcast_to(np.eye(2), (len(q), 2, 2))], axis=2)
+        jacobian[:, :, 0] = q @ np.array([[-si, -c], [c, -si]]).T
         weighted = np.einsum("kij,kjl->kil", weights, jacobian)  # W J
         hessian = np.einsum("kij,kil->jl", jacobian, weighted)
         gradient = np.einsum("kij,ki->j", weighted, residual)
@@ -129,7 +140,7 @@ def fit_weighted(
         if np.abs(step).max() < 1e-9:
             break
     residual = _residuals(q, s, yaw, translation)
-    weights = _inverse_2x2(pair_covariances(query_cov, stored_cov, yaw, centre_sigma))
+    weights = _inverse_2x2(_pair_covariances(query_cov, stored_cov, yaw, floor))
     d2 = np.einsum("ki,kij,kj->k", residual, weights, residual)
     rotation = np.eye(3)
     rotation[:2, :2] = _yaw_rotation(yaw)
