@@ -47,7 +47,7 @@ def test_a_drive_with_heavy_odometry_weighs_its_links_by_the_estimated_noise(tmp
     from neoslam.pipeline import NeoSLAM
     from neoslam.sim.simulator import simulate_route
 
-    config = simulation_config(NeoSLAMConfig(), "heavy", 3, "real")
+    config = simulation_config(NeoSLAMConfig(experience_map={"odometry_weights": "estimated"}), "heavy", 3, "real")
     write_dataset(tmp_path / "data", simulate_route("block", config.simulator))
     frames = list(read_dataset(tmp_path / "data").frames())
     slam = NeoSLAM(config)

@@ -51,7 +51,7 @@ class ExperienceMapConfig(Section):
         0.005, ge=1e-6, le=10, description="pose graph: an odometry link's yaw std is this times sqrt(metres), rad"
     )
     odometry_weights: Literal["distance", "estimated"] = Field(
-        "estimated",
+        "distance",
         description="pose graph: an odometry link's std grows with the metres it spans at the two rates above "
         "(distance), or also with its seconds at the odometry noise the moving-object tracks allow for "
         "(moving_objects.odometry_heading_noise and odometry_distance_noise, raised by their online estimate), "
