@@ -48,6 +48,7 @@ QUICK = "seeds 1-3"
 PROFILE = "vo"
 EUROC_IMU = ("mav0", "imu0", "data.csv")
 NS_PER_S = 1e9
+NOT_APPLICABLE = "–"
 STILL_RAD = 0.01  # the gyro's integrated rate about its mean stays within this: the MAV did not turn
 COLUMNS = [
     "source", "frames", "path m", "yaw rms mrad", "along rms cm", "across rms cm", "heading mrad/sqrt(s)",
@@ -118,8 +119,8 @@ def euroc_row(config: NeoSLAMConfig) -> tuple[dict, float]:
     stamps = np.asarray(sequence.timestamps, dtype=float)
     still = Trajectory(stamps, np.repeat(np.eye(4)[None], len(stamps), axis=0))
     row = odometry_figures("EuRoC V1_01 0-94, real (standing)", np.array([f.odometry_pose for f in frames]), still)
-    row["path m"] = row["end drift %"] = None  # standing: no path to divide by (the end drift in m is kept)
-    row["heading mrad/sqrt(m)"] = row["position cm/sqrt(m)"] = None
+    for column in ("path m", "end drift %", "heading mrad/sqrt(m)", "position cm/sqrt(m)"):
+        row[column] = NOT_APPLICABLE  # standing: no path to divide by (the end drift in metres is kept)
     imu = np.loadtxt(root.joinpath(*EUROC_IMU), delimiter=",", comments="#")
     seconds = (imu[:, 0] - imu[0, 0]) / NS_PER_S
     window = (imu[:, 0] / NS_PER_S >= stamps[0]) & (imu[:, 0] / NS_PER_S <= stamps[-1])
@@ -132,8 +133,8 @@ def _flag(row: dict, simulated: list[dict]) -> str:
     """Columns of a real row outside the simulated seeds' range."""
     outside = []
     for column in COLUMNS[3:]:
-        values = [s[column] for s in simulated if s[column] is not None]
-        if row.get(column) is not None and values and not min(values) <= row[column] <= max(values):
+        values = [s[column] for s in simulated if isinstance(s[column], float)]
+        if isinstance(row.get(column), float) and values and not min(values) <= row[column] <= max(values):
             outside.append(column)
     return ", ".join(outside)
 
@@ -157,7 +158,7 @@ def main(argv: list[str] | None = None) -> None:
     kitti["outside the simulated seeds"] = _flag(kitti, simulated)
     euroc, turned = euroc_row(config)
     stated = config.experience_map
-    stated_row = {
+    stated_row = dict.fromkeys(COLUMNS, NOT_APPLICABLE) | {
         "source": "pose graph, stated rates",
         "heading mrad/sqrt(m)": 1e3 * stated.odometry_yaw_sigma_per_root_metre,
         "position cm/sqrt(m)": 1e2 * stated.odometry_sigma_per_root_metre,
