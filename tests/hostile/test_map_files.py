@@ -106,9 +106,10 @@ def test_a_map_with_schema_objects_the_format_does_not_define_is_refused_untouch
 REBUILT = {
     "columns in another order, the rows copied by name": (
         "CREATE TABLE links_new (id INTEGER PRIMARY KEY, target INTEGER NOT NULL, source INTEGER NOT NULL, "
-        "relative BLOB NOT NULL, kind TEXT NOT NULL CHECK (kind IN ('odometry', 'loop')), distance_m REAL NOT NULL)",
-        "INSERT INTO links_new (id, target, source, relative, kind, distance_m) "
-        "SELECT id, target, source, relative, kind, distance_m FROM links",
+        "relative BLOB NOT NULL, kind TEXT NOT NULL CHECK (kind IN ('odometry', 'loop')), distance_m REAL NOT NULL, "
+        "duration_s REAL NOT NULL)",
+        "INSERT INTO links_new (id, target, source, relative, kind, distance_m, duration_s) "
+        "SELECT id, target, source, relative, kind, distance_m, duration_s FROM links",
     ),
     "a column dropped": (
         "CREATE TABLE links_new (id INTEGER PRIMARY KEY, source INTEGER NOT NULL, target INTEGER NOT NULL, "
@@ -118,12 +119,13 @@ REBUILT = {
     "a column added": (
         "CREATE TABLE links_new (id INTEGER PRIMARY KEY, source INTEGER NOT NULL, target INTEGER NOT NULL, "
         "relative BLOB NOT NULL, kind TEXT NOT NULL CHECK (kind IN ('odometry', 'loop')), "
-        "distance_m REAL NOT NULL, note TEXT)",
+        "distance_m REAL NOT NULL, duration_s REAL NOT NULL, note TEXT)",
         "INSERT INTO links_new SELECT *, NULL FROM links",
     ),
     "a column of another type": (
         "CREATE TABLE links_new (id INTEGER PRIMARY KEY, source INTEGER NOT NULL, target INTEGER NOT NULL, "
-        "relative BLOB NOT NULL, kind TEXT NOT NULL CHECK (kind IN ('odometry', 'loop')), distance_m TEXT NOT NULL)",
+        "relative BLOB NOT NULL, kind TEXT NOT NULL CHECK (kind IN ('odometry', 'loop')), distance_m TEXT NOT NULL, "
+        "duration_s REAL NOT NULL)",
         "INSERT INTO links_new SELECT * FROM links",
     ),
 }
@@ -145,7 +147,7 @@ def test_a_table_with_other_constraints_is_refused(tmp_path, stored):
     _edited(
         path,
         "CREATE TABLE links_new (id INTEGER PRIMARY KEY, source INTEGER NOT NULL, target INTEGER NOT NULL, "
-        "relative BLOB NOT NULL, kind TEXT NOT NULL, distance_m REAL NOT NULL)",  # no CHECK on kind
+        "relative BLOB NOT NULL, kind TEXT NOT NULL, distance_m REAL NOT NULL, duration_s REAL NOT NULL)",  # no CHECK
         "INSERT INTO links_new SELECT * FROM links",
         "DROP TABLE links",
         "ALTER TABLE links_new RENAME TO links",
