@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import harness
-from benchmarks._sweep import SPECS, run_spec, with_changes
+from benchmarks._sweep import SPECS, config_file, run_spec, with_changes
 from benchmarks.harness import data_root
 from neoslam.config import NeoSLAMConfig
 from neoslam.datasets.simulated import SimulatedDataset, read_dataset
@@ -177,7 +177,7 @@ def run_part(bench: harness.Run, args: argparse.Namespace) -> dict:
         seeds=seeds,
         data_root=data_root(),
         metrics=["loop_recall", "ate_corrected_m", "moving_kept_out"],
-        **({"config": args.config.resolve()} if args.config else {}),
+        **config_file(args),
     )
     figures: dict[tuple, dict] = {}
     for oracle in (False, True):  # the oracle is a measurement of its own: a sweep of its own

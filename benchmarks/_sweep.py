@@ -21,6 +21,11 @@ def sweep_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ray", metavar="ADDRESS", help="run the cells as Ray tasks on this cluster")
 
 
+def config_file(args: argparse.Namespace) -> dict[str, Path]:
+    """The spec change that puts the --config file under every cell (none without one)."""
+    return {"config": args.config.resolve()} if args.config is not None else {}
+
+
 def with_changes(spec: Spec, **changes) -> Spec:
     """The spec with some fields replaced, checked again."""
     values = spec.model_dump(exclude_unset=True) | changes

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import harness
-from benchmarks._sweep import SPECS, drive_runs, sweep_options, with_changes
+from benchmarks._sweep import SPECS, config_file, drive_runs, sweep_options, with_changes
 from benchmarks.harness import data_root
 from neoslam.config import NeoSLAMConfig
 from neoslam.datasets.simulated import read_dataset
@@ -183,7 +183,7 @@ def main(argv: list[str] | None = None) -> None:
     args = run.args
     sequences = args.sequences or (["05"] if args.quick else SEQUENCES)
     seeds = args.seeds or (QUICK_SEEDS if args.quick else SEEDS)
-    changes = {"config": args.config.resolve()} if args.config is not None else {}
+    changes = config_file(args)
     spec = with_changes(
         load_spec(SPEC),
         sources=[{"route": n} if n == "town" else {"kitti": n} for n in sequences],

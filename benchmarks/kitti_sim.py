@@ -40,7 +40,7 @@ import statistics
 from pathlib import Path
 
 from benchmarks import _gating, _landmarks, _moving, harness
-from benchmarks._sweep import SPECS, run_spec, sweep_options, with_changes
+from benchmarks._sweep import SPECS, config_file, run_spec, sweep_options, with_changes
 from benchmarks.harness import data_root
 from neoslam.config.calibration import DETECTION_PROFILES
 from neoslam.sweep import load_spec
@@ -169,7 +169,7 @@ def run_steps(bench: harness.Run, args: argparse.Namespace) -> dict:
         seeds=seeds,
         overrides=_on_street(spec.overrides, args.moving),
         data_root=data_root(),
-        **({"config": args.config.resolve()} if args.config else {}),
+        **config_file(args),
     )
     with run_spec(spec, args) as sweep:
         rows, errors = _drives(sweep.records)

@@ -42,7 +42,7 @@ import numpy as np
 from benchmarks import harness
 from benchmarks._loop_misses import CLASSES as MISS_CLASSES
 from benchmarks._loop_misses import replay
-from benchmarks._sweep import SPECS, run_spec, sweep_options, with_changes
+from benchmarks._sweep import SPECS, config_file, run_spec, sweep_options, with_changes
 from benchmarks.harness import data_root
 from neoslam.config import KeyframeConfig, MatchingConfig, NeoSLAMConfig, load_config
 from neoslam.datasets.simulated import read_dataset
@@ -336,7 +336,7 @@ def main(argv: list[str] | None = None) -> None:
     sequences = args.sequences or (["05", "08", "town"] if args.quick else [*SEQUENCES, "town"])
     base = load_config(args.config, environ={})
     seeds = args.seeds or (SEEDS[:1] if args.quick else SEEDS)
-    changes = {"config": args.config.resolve()} if args.config is not None else {}
+    changes = config_file(args)
     spec = with_changes(
         load_spec(SPEC),
         sources=[{"route": n} if n == "town" else {"kitti": n} for n in sequences],
