@@ -100,6 +100,7 @@ class NeoSLAM:
         self.moving_objects = MovingObjectDetector(
             config.moving_objects, config.object_map, config.keyframes.footprints
         )
+        self.keyframes.moves = self.moving_objects.window_views_move  # a broken-off car's first views join no keyframe
         self.experience_map = ExperienceMap(config.experience_map, self.grid_cells.dims, config.head_direction.cells)
         self.experience_map.backend.landmark_source = self.object_map  # its objects, landmarks with object_landmarks
         self.detected_closures: list[LoopClosure] = []  # accepted by the loop-closure detector
@@ -142,7 +143,7 @@ class NeoSLAM:
         elapsed_s = self._elapsed(frame)
         odometry = frame.odometry_pose
         observations = self.moving_objects.static(frame, self.keyframes.window)  # beyond the paper: no movers
-        keyframe = self.keyframes.add(frame.index, odometry, observations, travelled_m)  # 3.2
+        keyframe = self.keyframes.add(frame.index, odometry, observations, travelled_m, frame.timestamp)  # 3.2
         cells = self._cell_state()
         velocities = (frame.linear_velocity, frame.angular_velocity)
         keyframe_id = keyframe.id if keyframe is not None else None

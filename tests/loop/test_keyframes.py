@@ -342,3 +342,42 @@ def test_keyframe_distances_are_those_of_numpys_norm() -> None:
     centres = rng.normal(0.0, 30.0, (40, 3))
     keyframe = Keyframe(0, 0, np.eye(4), centres, ("car",) * 40, np.zeros((40, 16, 16), np.uint8))
     assert np.array_equal(keyframe.distances, np.linalg.norm(centres[:, None] - centres[None], axis=-1))
+
+
+def test_the_window_gives_each_objects_views_with_their_time_and_robot_position() -> None:
+    window = LocalObjectWindow(DEFAULTS.model_copy(update={"footprints": {}}))
+    for i in range(3):
+        window.add(_at(float(i)), (_seen([10.0 - i, 2.0, 0.0]),), float(i), time=0.1 * i)
+    (views,) = window.views(window.objects)
+    np.testing.assert_allclose(views.points, [[10.0, 2.0]] * 3, atol=1e-9)
+    np.testing.assert_allclose(views.times, [0.0, 0.1, 0.2])
+    np.testing.assert_allclose(views.robots, [[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])
+    assert views.covariances.shape == (3, 2, 2)
+
+
+def test_provisional_objects_whose_views_show_them_moving_join_no_keyframe() -> None:
+    """With `moves` set, a provisional window object it finds moving is left out of keyframes; a settled object
+    (a view of a track known to be static) is never put to the test."""
+    config = DEFAULTS.model_copy(update={**FIXED_RADIUS, "footprints": {}, "min_observations": 1, "min_objects": 2})
+    points = {"A": [4, 2, 0], "B": [8, 2, 0], "C": [12, -2, 0]}
+    seen = tuple(_seen(p, label) for label, p in points.items())
+    tested: list[int] = []
+
+    def moves(views) -> bool:
+        tested.append(len(views.times))
+        return bool(np.isclose(views.points[0, 1], -2.0))  # C
+
+    builder = KeyframeBuilder(config, marks_provisional=True)
+    builder.moves = moves
+    first = builder.add(0, _at(0.0), seen, 0.0)
+    assert first is not None and first.labels == ("A", "B") and tested == [1, 1, 1]
+    builder.window.settle(seen[:1])  # A's first view: a track known to be static
+    tested.clear()
+    again = tuple(_seen(p, label) for label, p in points.items())
+    second = builder.add(1, _at(0.0), again, config.spacing)
+    assert second is not None and second.labels == ("A", "B")
+    assert tested == [2, 2]  # B and C, two views each; not A
+    unmarked = KeyframeBuilder(config)
+    unmarked.moves = moves
+    made = unmarked.add(0, _at(0.0), seen, 0.0)
+    assert made is not None and made.labels == ("A", "B", "C")  # no provisional objects: nothing to test

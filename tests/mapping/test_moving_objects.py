@@ -9,7 +9,7 @@ from pydantic import ValidationError
 
 from neoslam.config import KeyframeConfig, MovingObjectsConfig, NeoSLAMConfig, ObjectMapConfig
 from neoslam.geometry import invert_pose, robot_points_to_camera, transform_points
-from neoslam.loop.keyframes import LocalObjectWindow
+from neoslam.loop.keyframes import LocalObjectWindow, WindowViews, view_covariances
 from neoslam.mapping.moving_objects import MovingObjectDetector
 from neoslam.types import Frame, ObjectObservation
 
@@ -402,3 +402,52 @@ def test_settled_views_taken_back_unsettle_their_object() -> None:
     assert window.objects[0].settled == 2
     window.retract(views[:2])
     assert window.objects[0].settled == 0 and window.objects[0].observations == 2
+
+
+def window_views(points, times, robots) -> WindowViews:
+    """Views of one keyframe-window object with the window's stereo covariances (depth std grows with depth²)."""
+    points, robots = np.asarray(points, float), np.asarray(robots, float)
+    rays = points - robots
+    depth = np.linalg.norm(rays, axis=1)
+    sigma = KeyframeConfig().depth_sigma_at_1m * depth**2
+    covariances = view_covariances(rays, sigma / depth, KeyframeConfig().bearing_sigma)
+    return WindowViews(points, covariances, np.asarray(times, float), robots)
+
+
+def test_a_window_object_of_a_passing_cars_first_views_moves() -> None:
+    """Four views a tenth of a second apart of a car 12 m off crossing at 8 m/s."""
+    times = np.arange(4) * PERIOD
+    points = np.column_stack([12.0 + 0 * times, -4.0 + 8.0 * times])
+    assert detector().window_views_move(window_views(points, times, np.zeros((4, 2))))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_parked_cars_window_object_does_not_move(seed: int) -> None:
+    """Views of a car 30 m ahead scattered by the stereo noise they are given, the robot driving on."""
+    rng = np.random.default_rng(seed)
+    times = np.arange(6) * PERIOD
+    robots = np.column_stack([10.0 * times, 0 * times])
+    clean = window_views(np.tile([30.0, 3.0], (6, 1)), times, robots)
+    noisy = np.array([rng.multivariate_normal(p, c) for p, c in zip(clean.points, clean.covariances, strict=True)])
+    assert not detector().window_views_move(window_views(noisy, times, robots))
+
+
+def test_views_spread_over_more_than_the_window_span_are_not_judged() -> None:
+    times = np.array([0.0, 0.5, 1.0, 1.5])
+    points = np.column_stack([12.0 + 0 * times, -4.0 + 1.0 * np.arange(4)])
+    views = window_views(points, times, np.zeros((4, 2)))
+    assert not detector().window_views_move(views)
+    assert detector(window_span=2.0).window_views_move(views)
+    assert not detector(window_span=2.0, window_scatter=0.0).window_views_move(views)
+
+
+def test_the_odometrys_error_between_views_is_allowed_for() -> None:
+    """A parked car 30 m off whose views the odometry's heading error turned about the robot by 0.03 rad over a
+    second: moving for a detector told of `vo`'s noise, not for one told of `heavy`'s."""
+    times = np.arange(11) * PERIOD
+    heading = 0.03 * np.linspace(0.0, 1.0, 11)
+    points = np.column_stack([30.0 * np.cos(heading), 30.0 * np.sin(heading)])
+    views = window_views(points, times, np.zeros((11, 2)))
+    stated = {"odometry_noise": "stated", "window_span": 2.0}
+    assert detector(**stated).window_views_move(views)
+    assert not detector(**stated, odometry_heading_noise=0.032).window_views_move(views)

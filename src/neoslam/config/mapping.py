@@ -326,6 +326,22 @@ class MovingObjectsConfig(Section):
         description="groups of views by distance from the robot: the heading error moves far objects more, the "
         "position error all alike (a line through the groups' variances separates them)",
     )
+    window_scatter: float = Field(
+        3.0,
+        ge=0,
+        le=1e6,
+        description="a provisional keyframe-window object (no view of a track known to be static) joins no keyframe "
+        "when its views scatter about their best common point by more than this reduced chi-square (their stereo "
+        "noise grown by the odometry's error between them, as a track's) within window_span: a car's track that "
+        "broke off before it was judged leaves such an object (0: no such test)",
+    )
+    window_span: float = Field(
+        1.2,
+        ge=0,
+        le=3600,
+        description="s: the views of a moving car's window object come within about half a second, a parked car's "
+        "provisional object's over a few seconds, where far views' depth noise may scatter them as much",
+    )
     track_length: int = Field(
         20, ge=2, le=10_000, description="observations kept per track (the fit's window), a bound on memory"
     )

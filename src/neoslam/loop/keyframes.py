@@ -29,6 +29,7 @@ __all__ = [
     "footprint_radii",
     "object_centres",
     "view_covariances",
+    "WindowViews",
 ]
 
 # The latest views the window can give back (retract): a moving object is found within a track's views (a few
@@ -99,6 +100,17 @@ class _WindowObject:
         return self.spread / self.weight**2
 
 
+@dataclass(frozen=True)
+class WindowViews:
+    """The views of one window object: ground-plane points (n, 2), their stereo covariances (n, 2, 2), times (n,)
+    and the robot's position (n, 2) at each."""
+
+    points: np.ndarray
+    covariances: np.ndarray
+    times: np.ndarray
+    robots: np.ndarray
+
+
 @dataclass
 class LocalObjectWindow:
     """Objects fused from the observations of the last `window_length` metres of travel."""
@@ -106,18 +118,18 @@ class LocalObjectWindow:
     config: KeyframeConfig
     marks_provisional: bool = False  # objects without a settled view are provisional in keyframes (`unjudged: wait`)
     objects: list[_WindowObject] = field(default_factory=list)
-    # id(view) -> (view, the object it joined, its weighted point, its weight, its weighted covariance), oldest
-    # first: what retract undoes.
-    _taken: dict[int, tuple[ObjectObservation, _WindowObject, np.ndarray, float, np.ndarray]] = field(
-        default_factory=dict
+    # id(view) -> (view, the object it joined, its weighted point, its weight, its weighted covariance, when and
+    # from where (robot x, y) it was seen), oldest first: what retract undoes and what a view's motion test reads.
+    _taken: dict[int, tuple[ObjectObservation, _WindowObject, np.ndarray, float, np.ndarray, float, np.ndarray]] = (
+        field(default_factory=dict)
     )
     _settled: set[int] = field(default_factory=set)  # id(view) of the settled views held in _taken
 
     def add(
-        self, pose: np.ndarray, observations: tuple[ObjectObservation, ...], odometer_m: float
+        self, pose: np.ndarray, observations: tuple[ObjectObservation, ...], odometer_m: float, time: float = 0.0
     ) -> list[_WindowObject]:
-        """Fuse one frame's observations, seen from robot pose T_world_robot, and forget stale objects; returns the
-        window object each observation joined."""
+        """Fuse one frame's observations, seen from robot pose T_world_robot at `time` (s), and forget stale
+        objects; returns the window object each observation joined."""
         joined = []
         if observations:
             measured_depth = np.array([o.center_camera[2] for o in observations])
@@ -134,7 +146,8 @@ class LocalObjectWindow:
             for observation, point, weight, covariance in zip(observations, world, weights, covariances, strict=True):
                 joined.append(self._fuse(observation, point, float(weight), covariance, odometer_m))
                 self._taken[id(observation)] = (
-                    observation, joined[-1], weight * point, float(weight), weight**2 * covariance
+                    observation, joined[-1], weight * point, float(weight), weight**2 * covariance, time,
+                    pose[:2, 3].copy(),
                 )  # fmt: skip
         horizon = odometer_m - self.config.window_length
         kept = [o for o in self.objects if o.last_seen_m >= horizon]
@@ -166,7 +179,7 @@ class LocalObjectWindow:
             entry = self._taken.pop(id(observation), None)
             if entry is None or entry[0] is not observation:
                 continue
-            _, joined, weighted_point, weight, weighted_covariance = entry
+            _, joined, weighted_point, weight, weighted_covariance, _, _ = entry
             joined.weighted_sum -= weighted_point
             joined.weight -= weight
             joined.spread -= weighted_covariance
@@ -215,6 +228,21 @@ class LocalObjectWindow:
         self.objects.append(joined)
         return joined
 
+    def views(self, objects: list[_WindowObject]) -> list[WindowViews]:
+        """The views each of `objects` holds that the window still records (the latest RETRACTABLE_VIEWS)."""
+        held: dict[int, list] = {id(o): [] for o in objects}
+        for _, joined, weighted_point, weight, weighted_covariance, time, robot in self._taken.values():
+            if id(joined) in held:
+                held[id(joined)].append(
+                    (weighted_point[:2] / weight, weighted_covariance[:2, :2] / weight**2, time, robot)
+                )
+        return [
+            WindowViews(*(np.array(column) for column in zip(*held[id(o)], strict=True)))
+            if held[id(o)]
+            else WindowViews(np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0), np.zeros((0, 2)))
+            for o in objects
+        ]
+
     def confirmed(self) -> list[_WindowObject]:
         """Objects seen often enough to trust (single sightings are mostly false positives)."""
         return [o for o in self.objects if o.observations >= self.config.min_observations]
@@ -249,11 +277,16 @@ class KeyframeBuilder:
         # Called after every frame with what it did (KeyframeStep): lets a benchmark or a tool follow the keyframes
         # without changing them; the pipeline itself adds none.
         self.observers: list[Callable[[KeyframeStep], None]] = []
+        # Given the views of a provisional window object, whether they show it moving: such objects join no
+        # keyframe (the pipeline sets the motion detector's test; None: every object joins).
+        self.moves: Callable[[WindowViews], bool] | None = None
 
-    def add(self, frame_index: int, pose: np.ndarray, observations, travelled_m: float) -> Keyframe | None:
-        """Feed one frame (pose estimate and observations); returns a new keyframe when one is due."""
+    def add(
+        self, frame_index: int, pose: np.ndarray, observations, travelled_m: float, time: float = 0.0
+    ) -> Keyframe | None:
+        """Feed one frame (pose estimate and observations, `time` in s); returns a new keyframe when one is due."""
         self.odometer_m += travelled_m
-        joined = self.window.add(pose, observations, self.odometer_m)
+        joined = self.window.add(pose, observations, self.odometer_m, time)
         keyframe = None
         if self.odometer_m >= self._next_keyframe_m:
             keyframe = self._make(frame_index, pose)
@@ -264,7 +297,7 @@ class KeyframeBuilder:
         return keyframe
 
     def _make(self, frame_index: int, pose: np.ndarray) -> Keyframe | None:
-        objects = self.window.confirmed()
+        objects = self._still(self.window.confirmed())
         if not objects:
             return None
         positions = np.array([o.position for o in objects])
@@ -285,6 +318,17 @@ class KeyframeBuilder:
         self._next_id += 1
         self.frames.append(frame_index)
         return keyframe
+
+    def _still(self, objects: list[_WindowObject]) -> list[_WindowObject]:
+        """The objects without those provisional ones whose views show them moving (`moves`): a car's track that
+        broke off before it was judged leaves a window object of its first views."""
+        if self.moves is None or not self.window.marks_provisional:
+            return objects
+        provisional = [o for o in objects if o.settled == 0]
+        moving = {
+            id(o) for o, views in zip(provisional, self.window.views(provisional), strict=True) if self.moves(views)
+        }
+        return [o for o in objects if id(o) not in moving]
 
     def _neighbourhood(self, distances: np.ndarray) -> np.ndarray:
         """Indices of the objects within `neighbourhood_radius` of the current object; where fewer than

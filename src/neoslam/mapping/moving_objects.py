@@ -34,6 +34,11 @@ keyframe and no map object.
   to be static (`_proven_static`: judged, and its speed plus `static_sigmas` stds below `min_speed`); a window
   object with no settled view is provisional in keyframes (no contradiction to a match when missing). A track
   known to be static is no predecessor of a new one (its views are not taken back with a car's).
+- A keyframe-window object none of whose views is settled is moving too when its views came within
+  `window_span` seconds and scatter about their best common point beyond `window_scatter` (reduced chi-square, each
+  view's stereo noise grown by the odometry's error since, as above): it joins no keyframe (`window_views_move`, which
+  the keyframe builder asks). A car detected only now and then breaks its track every few frames, each piece's first
+  views pass before it can be judged, and the window fuses them into an object of their own.
 - Tracks end when unseen for `max_unseen` seconds; at most `max_tracks` are kept. Moving tracks are kept as a small
   record (label, last view, frame) to be reported in the corrected map. Deterministic: no randomness, ties broken
   by track and observation order.
@@ -45,7 +50,7 @@ import numpy as np
 
 from neoslam.config import MovingObjectsConfig, ObjectMapConfig
 from neoslam.geometry import camera_points_to_robot, transform_points
-from neoslam.loop.keyframes import LocalObjectWindow, object_centres
+from neoslam.loop.keyframes import LocalObjectWindow, WindowViews, object_centres
 from neoslam.mapping.object_map import MapObject, depth_sigmas
 from neoslam.mapping.odometry_noise import OdometryNoiseEstimate
 from neoslam.types import Frame, ObjectObservation
@@ -302,6 +307,33 @@ class MovingObjectDetector:
             return np.einsum("ni,ni->n", at[end] - at[start], across)
 
         self.noise_estimate.add(lengths, displacement(0, 3), displacement(0, 1), displacement(2, 3), longer)
+
+    def window_views_move(self, views: WindowViews) -> bool:
+        """Whether a keyframe-window object's views show it moving: seen within `window_span` seconds and
+        scattered about their best common point beyond `window_scatter` (reduced chi-square), each view's stereo
+        covariance grown by the odometry's error since it was made (heading error turning it about the robot by
+        its range, distance error shifting it), as a track's views are."""
+        config = self.config
+        n = len(views.times)
+        if config.window_scatter <= 0 or n < 2 or np.ptp(views.times) >= config.window_span:
+            return False
+        heading_noise, distance_noise = self.odometry_noise()
+        arms = views.points - views.robots
+        ranges = np.linalg.norm(arms, axis=1)
+        across = np.stack([-arms[:, 1], arms[:, 0]], axis=1) / np.maximum(ranges, 1e-9)[:, None]
+        age = views.times.max() - views.times
+        covariance = (
+            views.covariances
+            + ((heading_noise * ranges) ** 2 * age)[:, None, None] * across[:, :, None] * across[:, None, :]
+            + (distance_noise**2 * age)[:, None, None] * np.eye(2)
+        )
+        information = np.linalg.inv(covariance)
+        total = information.sum(axis=0)
+        weighted = np.einsum("nij,nj->ni", information, views.points)
+        best = np.linalg.solve(total, weighted.sum(axis=0))  # the point the views agree on best
+        offsets = views.points - best
+        chi_square = float(np.einsum("ni,nij,nj->", offsets, information, offsets))
+        return chi_square > config.window_scatter * 2 * (n - 1)
 
     def odometry_noise(self) -> tuple[float, float]:
         """The heading (rad) and distance (m) random walks per square root of a second the tracks allow for: as
