@@ -100,7 +100,8 @@ class NeoSLAM:
         self.moving_objects = MovingObjectDetector(
             config.moving_objects, config.object_map, config.keyframes.footprints
         )
-        self.keyframes.moves = self.moving_objects.window_views_move  # a broken-off car's first views join no keyframe
+        if moving.window_scatter > 0:  # a broken-off car's first views join no keyframe
+            self.keyframes.moves = self.moving_objects.window_views_move
         self.experience_map = ExperienceMap(config.experience_map, self.grid_cells.dims, config.head_direction.cells)
         self.experience_map.backend.landmark_source = self.object_map  # its objects, landmarks with object_landmarks
         self.detected_closures: list[LoopClosure] = []  # accepted by the loop-closure detector

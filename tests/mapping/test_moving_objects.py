@@ -418,7 +418,8 @@ def test_a_window_object_of_a_passing_cars_first_views_moves() -> None:
     """Four views a tenth of a second apart of a car 12 m off crossing at 8 m/s."""
     times = np.arange(4) * PERIOD
     points = np.column_stack([12.0 + 0 * times, -4.0 + 8.0 * times])
-    assert detector().window_views_move(window_views(points, times, np.zeros((4, 2))))
+    assert detector(window_scatter=3.0).window_views_move(window_views(points, times, np.zeros((4, 2))))
+    assert not detector().window_views_move(window_views(points, times, np.zeros((4, 2))))  # off by default
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -429,15 +430,15 @@ def test_a_parked_cars_window_object_does_not_move(seed: int) -> None:
     robots = np.column_stack([10.0 * times, 0 * times])
     clean = window_views(np.tile([30.0, 3.0], (6, 1)), times, robots)
     noisy = np.array([rng.multivariate_normal(p, c) for p, c in zip(clean.points, clean.covariances, strict=True)])
-    assert not detector().window_views_move(window_views(noisy, times, robots))
+    assert not detector(window_scatter=3.0).window_views_move(window_views(noisy, times, robots))
 
 
 def test_views_spread_over_more_than_the_window_span_are_not_judged() -> None:
     times = np.array([0.0, 0.5, 1.0, 1.5])
     points = np.column_stack([12.0 + 0 * times, -4.0 + 1.0 * np.arange(4)])
     views = window_views(points, times, np.zeros((4, 2)))
-    assert not detector().window_views_move(views)
-    assert detector(window_span=2.0).window_views_move(views)
+    assert not detector(window_scatter=3.0).window_views_move(views)
+    assert detector(window_scatter=3.0, window_span=2.0).window_views_move(views)
     assert not detector(window_span=2.0, window_scatter=0.0).window_views_move(views)
 
 
@@ -448,6 +449,6 @@ def test_the_odometrys_error_between_views_is_allowed_for() -> None:
     heading = 0.03 * np.linspace(0.0, 1.0, 11)
     points = np.column_stack([30.0 * np.cos(heading), 30.0 * np.sin(heading)])
     views = window_views(points, times, np.zeros((11, 2)))
-    stated = {"odometry_noise": "stated", "window_span": 2.0}
+    stated = {"odometry_noise": "stated", "window_span": 2.0, "window_scatter": 3.0}
     assert detector(**stated).window_views_move(views)
     assert not detector(**stated, odometry_heading_noise=0.032).window_views_move(views)

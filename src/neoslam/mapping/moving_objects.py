@@ -34,11 +34,12 @@ keyframe and no map object.
   to be static (`_proven_static`: judged, and its speed plus `static_sigmas` stds below `min_speed`); a window
   object with no settled view is provisional in keyframes (no contradiction to a match when missing). A track
   known to be static is no predecessor of a new one (its views are not taken back with a car's).
-- A keyframe-window object none of whose views is settled is moving too when its views came within
-  `window_span` seconds and scatter about their best common point beyond `window_scatter` (reduced chi-square, each
-  view's stereo noise grown by the odometry's error since, as above): it joins no keyframe (`window_views_move`, which
-  the keyframe builder asks). A car detected only now and then breaks its track every few frames, each piece's first
-  views pass before it can be judged, and the window fuses them into an object of their own.
+- With `window_scatter` set (off by default), a keyframe-window object none of whose views is settled is moving
+  too when its views came within `window_span` seconds and scatter about their best common point beyond
+  `window_scatter` (reduced chi-square, each view's stereo noise grown by the odometry's error since, as above): it
+  joins no keyframe (`window_views_move`, which the keyframe builder asks). A car detected only now and then
+  breaks its track every few frames, each piece's first views pass before it can be judged, and the window fuses
+  them into an object of their own.
 - Tracks end when unseen for `max_unseen` seconds; at most `max_tracks` are kept. Moving tracks are kept as a small
   record (label, last view, frame) to be reported in the corrected map. Deterministic: no randomness, ties broken
   by track and observation order.
