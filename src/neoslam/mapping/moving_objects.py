@@ -318,17 +318,11 @@ class MovingObjectDetector:
         n = len(views.times)
         if config.window_scatter <= 0 or n < 2 or np.ptp(views.times) >= config.window_span:
             return False
-        heading_noise, distance_noise = self.odometry_noise()
         arms = views.points - views.robots
         ranges = np.linalg.norm(arms, axis=1)
-        across = np.stack([-arms[:, 1], arms[:, 0]], axis=1) / np.maximum(ranges, 1e-9)[:, None]
+        rays = arms / np.maximum(ranges, 1e-9)[:, None]
         age = views.times.max() - views.times
-        covariance = (
-            views.covariances
-            + ((heading_noise * ranges) ** 2 * age)[:, None, None] * across[:, :, None] * across[:, None, :]
-            + (distance_noise**2 * age)[:, None, None] * np.eye(2)
-        )
-        information = np.linalg.inv(covariance)
+        information = np.linalg.inv(self._with_odometry_error(views.covariances, rays, ranges, age))
         total = information.sum(axis=0)
         weighted = np.einsum("nij,nj->ni", information, views.points)
         best = np.linalg.solve(total, weighted.sum(axis=0))  # the point the views agree on best
@@ -397,19 +391,26 @@ class MovingObjectDetector:
         it: stereo noise, and the odometry's since (a heading random walk turns a view about the robot, by its range
         times the heading error; the distance error shifts it), taken as independent per observation (the shared
         part of two views' odometry errors is left out). Zero for empty entries of the ring."""
-        heading_noise, distance_noise = self.odometry_noise()
-        rays = self._rays[slots]
-        across = np.stack([-rays[..., 1], rays[..., 0]], axis=-1)
-        turned = (heading_noise * self._ranges[slots]) ** 2 * age
-        moved = distance_noise**2 * age
-        covariance = (
-            self._covariance[slots]
-            + turned[..., None, None] * across[..., :, None] * across[..., None, :]
-            + moved[..., None, None] * np.eye(2)
-        )
+        covariance = self._with_odometry_error(self._covariance[slots], self._rays[slots], self._ranges[slots], age)
         held = self._held[slots]
         covariance[~held] = np.eye(2)  # any invertible matrix: the entry is zeroed below
         return np.linalg.inv(covariance) * held[..., None, None]
+
+    def _with_odometry_error(
+        self, covariance: np.ndarray, rays: np.ndarray, ranges: np.ndarray, age: np.ndarray
+    ) -> np.ndarray:
+        """(..., 2, 2) stereo covariances of views on unit `rays` at `ranges` grown by the odometry's error over
+        the `age` s since: a heading random walk turns a view about the robot by its range times the heading error,
+        the distance error shifts it."""
+        heading_noise, distance_noise = self.odometry_noise()
+        across = np.stack([-rays[..., 1], rays[..., 0]], axis=-1)
+        turned = (heading_noise * ranges) ** 2 * age
+        moved = distance_noise**2 * age
+        return (
+            covariance
+            + turned[..., None, None] * across[..., :, None] * across[..., None, :]
+            + moved[..., None, None] * np.eye(2)
+        )
 
     def _judge(self, slots: np.ndarray) -> None:
         """Tracks old enough to judge whose velocity is significant and fast enough move from now on."""
