@@ -82,7 +82,7 @@ def test_the_place_is_ranked_first_among_streets_of_the_same_kind() -> None:
     assert hits >= 18  # of 20
 
 
-def test_the_unsorted_tail_scores_as_the_sorted_keys_do() -> None:
+def test_the_tail_scores_as_the_merged_keys_do() -> None:
     rng = np.random.default_rng(6)
     streets = [_street(rng) for _ in range(80)]
     query = _keyframe(*streets[40])
@@ -93,7 +93,7 @@ def test_the_unsorted_tail_scores_as_the_sorted_keys_do() -> None:
     tail = TriangleIndex(1.0, 12, 40.0)
     for i, street in enumerate(streets):
         tail.add(_keyframe(*street, id=i))
-    assert 0 < tail._tail_size < sum(len(_keys(_keyframe(*street), spread=False)) for street in streets)
+    assert 0 < len(tail._tail_keys) < sum(len(_keys(_keyframe(*street), spread=False)) for street in streets)
     for from_tail, from_sorted in zip(tail.scores(query), merged.scores(query), strict=True):
         np.testing.assert_allclose(from_tail, from_sorted)
 

@@ -172,7 +172,7 @@ class LoopClosureDetector:
         too far from the place's keyframes, off its level, or turned more than the odometry can drift; `eligible`:
         the ids (increasing) of the stored keyframes it may close a loop with."""
         keyframe = query.keyframe
-        match = self._match(query, place.keyframe, len(eligible))
+        match = self._match(query, place.side(self.config), len(eligible))
         members = np.asarray(place.members, dtype=int)
         found = np.minimum(np.searchsorted(eligible, members), max(len(eligible) - 1, 0))
         members = members[eligible[found] == members] if len(eligible) else members[:0]

@@ -24,9 +24,9 @@ __all__ = ["TriangleIndex", "triangle_keys"]
 
 LABEL_BITS = 6  # up to 63 labels (COCO has 80 classes; a street uses far fewer)
 SIDE_BITS = TRIANGLE_SIDE_BITS  # up to 255 bins a side (matching.triangle_max_side / triangle_side_bin)
-MERGE_SHARE = 0.25  # the unsorted tail is merged into the sorted keys once it holds this share of them
+MERGE_SHARE = 0.25  # the tail is merged into the main keys once it holds this share of them
 MIN_TAIL = 4096  # or, while the index is small, this many keys
-MAX_TAIL = 32768  # and at most this many: a query sorts the tail (a merge costs a sort of all keys, < 1 ms per add)
+MAX_TAIL = 32768  # and at most this many: an add copies the tail (a merge costs a sort of all keys, < 1 ms per add)
 
 
 def _pack(labels: np.ndarray, bins: np.ndarray) -> np.ndarray:
@@ -79,6 +79,18 @@ def triangle_keys(
     return np.unique(np.concatenate(keys)) if keys else np.zeros(0, dtype=np.int64)
 
 
+def _runs(sorted_keys: np.ndarray, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where each key's run of equal keys starts in `sorted_keys`, and its length (0: not there)."""
+    low = np.searchsorted(sorted_keys, keys, side="left")
+    return low, np.searchsorted(sorted_keys, keys, side="right") - low
+
+
+def _postings(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Indices of every run [start, start + count), laid end to end."""
+    offsets = np.repeat(starts - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts)
+    return offsets + np.arange(counts.sum())
+
+
 class TriangleIndex:
     """Triangle keys of stored keyframes (by slot, in the order stored) and their scores against a query."""
 
@@ -87,9 +99,8 @@ class TriangleIndex:
         self._codes: dict[str, int] = {}
         self._keys = np.zeros(0, dtype=np.int64)  # sorted
         self._slots = np.zeros(0, dtype=np.int32)
-        self._tail_keys: list[np.ndarray] = []
-        self._tail_slots: list[np.ndarray] = []
-        self._tail_size = 0
+        self._tail_keys = np.zeros(0, dtype=np.int64)  # sorted; equal keys in the order stored
+        self._tail_slots = np.zeros(0, dtype=np.int32)
         self._key_counts = np.zeros(256)  # per slot: its number of keys (grown by doubling)
         self._stored = 0
 
@@ -99,7 +110,7 @@ class TriangleIndex:
     @property
     def nbytes(self) -> int:
         """Memory held by the keys, bytes."""
-        return int(self._keys.nbytes + self._slots.nbytes + sum(a.nbytes for a in self._tail_keys) * 1.5)
+        return int(self._keys.nbytes + self._slots.nbytes + self._tail_keys.nbytes + self._tail_slots.nbytes)
 
     def _label_codes(self, labels: tuple[str, ...], add: bool) -> np.ndarray:
         for label in labels if add else ():
@@ -110,22 +121,22 @@ class TriangleIndex:
         """Store the next keyframe's keys (its slot is the number stored before it)."""
         codes = self._label_codes(keyframe.labels, add=True)
         keys = triangle_keys(keyframe, codes, self.side_bin, self.max_objects, self.max_side, spread=False)
-        self._tail_keys.append(keys)
-        self._tail_slots.append(np.full(len(keys), self._stored, dtype=np.int32))
-        self._tail_size += len(keys)
+        at = np.searchsorted(self._tail_keys, keys, side="right")
+        self._tail_keys = np.insert(self._tail_keys, at, keys)
+        self._tail_slots = np.insert(self._tail_slots, at, np.int32(self._stored))
         if self._stored == len(self._key_counts):
             self._key_counts = np.concatenate([self._key_counts, np.zeros_like(self._key_counts)])
         self._key_counts[self._stored] = len(keys)
         self._stored += 1
-        if self._tail_size >= min(max(MIN_TAIL, MERGE_SHARE * len(self._keys)), MAX_TAIL):
+        if len(self._tail_keys) >= min(max(MIN_TAIL, MERGE_SHARE * len(self._keys)), MAX_TAIL):
             self._merge()
 
     def _merge(self) -> None:
-        keys = np.concatenate([self._keys, *self._tail_keys])
-        slots = np.concatenate([self._slots, *self._tail_slots])
+        keys = np.concatenate([self._keys, self._tail_keys])
+        slots = np.concatenate([self._slots, self._tail_slots])
         order = np.argsort(keys, kind="stable")
         self._keys, self._slots = keys[order], slots[order]
-        self._tail_keys, self._tail_slots, self._tail_size = [], [], 0
+        self._tail_keys, self._tail_slots = self._tail_keys[:0], self._tail_slots[:0]
 
     def scores(self, query: Keyframe) -> tuple[np.ndarray, np.ndarray]:
         """Per stored slot: the summed inverse document frequency of the keys it shares with the query, over the
@@ -136,22 +147,15 @@ class TriangleIndex:
             return np.zeros(0), np.zeros(0)
         codes = self._label_codes(query.labels, add=False)
         keys = triangle_keys(query, codes, self.side_bin, self.max_objects, self.max_side, spread=True)
-        low = np.searchsorted(self._keys, keys, side="left")
-        high = np.searchsorted(self._keys, keys, side="right")
-        tail_keys = np.concatenate(self._tail_keys) if self._tail_keys else np.zeros(0, dtype=np.int64)
-        tail_slots = np.concatenate(self._tail_slots) if self._tail_slots else np.zeros(0, dtype=np.int32)
-        sorted_tail = np.sort(tail_keys)
-        in_tail = np.searchsorted(sorted_tail, keys, side="right") - np.searchsorted(sorted_tail, keys, side="left")
-        found = high - low + in_tail > 0
-        keys, idf = keys[found], np.log((stored + 1.0) / ((high - low + in_tail)[found] + 0.5))
-        counts, starts = (high - low)[found], low[found]
-        # every posting of every found key: the runs [low, high) laid end to end
-        runs = np.repeat(starts - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts) + np.arange(counts.sum())
-        slots, weights = self._slots[runs], np.repeat(idf, counts)
-        if len(tail_keys) and len(keys):  # keys are sorted and unique (triangle_keys)
-            position = np.minimum(np.searchsorted(keys, tail_keys), len(keys) - 1)
-            hit = keys[position] == tail_keys
-            slots, weights = np.concatenate([slots, tail_slots[hit]]), np.concatenate([weights, idf[position[hit]]])
+        low, count = _runs(self._keys, keys)
+        tail_low, tail_count = _runs(self._tail_keys, keys)
+        found = count + tail_count > 0
+        idf = np.log((stored + 1.0) / ((count + tail_count)[found] + 0.5))
+        count, tail_count = count[found], tail_count[found]
+        slots = np.concatenate(
+            [self._slots[_postings(low[found], count)], self._tail_slots[_postings(tail_low[found], tail_count)]]
+        )
+        weights = np.concatenate([np.repeat(idf, count), np.repeat(idf, tail_count)])
         shared = np.bincount(slots, minlength=stored).astype(float)
         scores = np.bincount(slots, weights=weights, minlength=stored)
         return scores / np.sqrt(np.maximum(self._key_counts[:stored], 1.0)), shared

@@ -32,13 +32,14 @@ d² = rᵀ C⁻¹ r is chi-square with 2 degrees of freedom for a right pair.
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import numpy as np
 from scipy.stats import chi2
 
 from neoslam.config import MatchingConfig
-from neoslam.geometry import fit_yaw_translation, make_pose, transform_points
+from neoslam.geometry import transform_points
 from neoslam.types import Keyframe
 
 __all__ = [
@@ -103,8 +104,81 @@ class FitResult:
         self.transform, self.yaw, self.d2, self.distances = transform, yaw, d2, distances
 
 
-def _residuals(query: np.ndarray, stored: np.ndarray, yaw: float, translation: np.ndarray) -> np.ndarray:
-    return query @ _yaw_rotation(yaw).T + translation - stored
+# A fit's pairs as columns of one (k, 11) array, taken once per trimmed fit and sliced by its inliers: query x, y;
+# stored x, y; height offset; the query centre's covariance (a, b, d: [[a, b], [b, d]]); the stored centre's plus
+# both centres' floor. The Gauss-Newton sums below are written out over these columns: a fit has a few to a few dozen
+# pairs, where numpy's per-call cost over (k, 2, 2) arrays, not the arithmetic, is what a fit takes.
+_QX, _QY, _SX, _SY, _DZ, _QA, _QB, _QD, _SA, _SB, _SD = range(11)
+
+
+def _pair_columns(
+    query: np.ndarray, stored: np.ndarray, query_cov: np.ndarray, stored_cov: np.ndarray, centre_sigma: float
+) -> np.ndarray:
+    floor = 2.0 * centre_sigma**2
+    return np.column_stack(
+        [
+            query[:, 0], query[:, 1], stored[:, 0], stored[:, 1], stored[:, 2] - query[:, 2],
+            query_cov[:, 0, 0], query_cov[:, 0, 1], query_cov[:, 1, 1],
+            stored_cov[:, 0, 0] + floor, stored_cov[:, 0, 1], stored_cov[:, 1, 1] + floor,
+        ]
+    )  # fmt: skip
+
+
+def _weights(pairs: np.ndarray, c: float, s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Components (a, b, d) of each pair's information C⁻¹, C = R Σ_q Rᵀ + Σ_s + floor, R turned by (cos, sin)."""
+    qa, qb, qd = pairs[:, _QA], pairs[:, _QB], pairs[:, _QD]
+    a = c * c * qa - 2.0 * c * s * qb + s * s * qd + pairs[:, _SA]
+    d = s * s * qa + 2.0 * c * s * qb + c * c * qd + pairs[:, _SD]
+    b = c * s * (qa - qd) + (c * c - s * s) * qb + pairs[:, _SB]
+    determinant = a * d - b * b
+    return d / determinant, -b / determinant, a / determinant
+
+
+def _residuals(pairs: np.ndarray, c: float, s: float, tx: float, ty: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each pair's residual (x, y): the query centre moved by the fit, minus the stored centre."""
+    qx, qy = pairs[:, _QX], pairs[:, _QY]
+    return c * qx - s * qy + tx - pairs[:, _SX], s * qx + c * qy + ty - pairs[:, _SY]
+
+
+def _unweighted_start(pairs: np.ndarray) -> tuple[float, float, float]:
+    """Yaw and translation (x, y) of the plain least-squares fit (geometry.fit_yaw_translation, ground plane)."""
+    means = pairs[:, :4].mean(axis=0)
+    qx, qy = pairs[:, _QX] - means[_QX], pairs[:, _QY] - means[_QY]
+    sx, sy = pairs[:, _SX] - means[_SX], pairs[:, _SY] - means[_SY]
+    yaw = math.atan2(float((qx * sy - qy * sx).sum()), float((qx * sx + qy * sy).sum()))
+    c, s = math.cos(yaw), math.sin(yaw)
+    return yaw, means[_SX] - (c * means[_QX] - s * means[_QY]), means[_SY] - (s * means[_QX] + c * means[_QY])
+
+
+def _fit_pairs(pairs: np.ndarray) -> FitResult:
+    """fit_weighted over pair columns (_pair_columns)."""
+    yaw, tx, ty = _unweighted_start(pairs)
+    qx, qy = pairs[:, _QX], pairs[:, _QY]
+    for _ in range(GAUSS_NEWTON_STEPS):
+        c, s = math.cos(yaw), math.sin(yaw)
+        wa, wb, wd = _weights(pairs, c, s)
+        rx, ry = _residuals(pairs, c, s, tx, ty)
+        jx, jy = -s * qx - c * qy, c * qx - s * qy  # ∂r/∂yaw; ∂r/∂translation is I
+        ux, uy = wa * jx + wb * jy, wb * jx + wd * jy  # W J, yaw's column
+        sums = np.stack([jx * ux + jy * uy, ux, uy, wa, wb, wd, ux * rx + uy * ry, wa * rx + wb * ry,
+                         wb * rx + wd * ry]).sum(axis=1)  # fmt: skip
+        hessian = sums[[0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(3, 3)  # Jᵀ W J
+        try:
+            step = -np.linalg.solve(hessian, sums[6:])  # Jᵀ W r
+        except np.linalg.LinAlgError:
+            break  # degenerate geometry: keep the current fit
+        yaw += float(step[0])
+        tx, ty = tx + float(step[1]), ty + float(step[2])
+        if np.abs(step).max() < 1e-9:
+            break
+    c, s = math.cos(yaw), math.sin(yaw)
+    rx, ry = _residuals(pairs, c, s, tx, ty)
+    wa, wb, wd = _weights(pairs, c, s)
+    d2 = wa * rx * rx + 2.0 * wb * rx * ry + wd * ry * ry
+    transform = np.eye(4)
+    transform[:2, :2] = [[c, -s], [s, c]]
+    transform[:3, 3] = tx, ty, float(pairs[:, _DZ].mean())
+    return FitResult(transform, yaw, d2, np.sqrt(rx * rx + ry * ry))
 
 
 def fit_weighted(
@@ -115,38 +189,9 @@ def fit_weighted(
     centre_sigma: float,
 ) -> FitResult:
     """Yaw and translation minimising Σ d² of the pairs (query (k, 3) -> stored (k, 3) centres, their (k, 2, 2)
-    ground-plane covariances); the height offset is the mean one (objects' heights say little about a place)."""
-    start = fit_yaw_translation(query, stored)
-    yaw = float(np.arctan2(start[1, 0], start[0, 0]))
-    translation = start[:2, 3].copy()
-    q, s = query[:, :2], stored[:, :2]
-    floor = _centre_floor(centre_sigma)
-    jacobian = np.empty((len(q), 2, 3))  # ∂r/∂(yaw, translation) for each pair: the translation's part is I
-    jacobian[:, :, 1:] = np.eye(2)
-    for _ in range(GAUSS_NEWTON_STEPS):
-        weights = _inverse_2x2(_pair_covariances(query_cov, stored_cov, yaw, floor))
-        residual = _residuals(q, s, yaw, translation)
-        c, si = np.cos(yaw), np.sin(yaw)
-        jacobian[:, :, 0] = q @ np.array([[-si, -c], [c, -si]]).T
-        weighted = np.einsum("kij,kjl->kil", weights, jacobian)  # W J
-        hessian = np.einsum("kij,kil->jl", jacobian, weighted)
-        gradient = np.einsum("kij,ki->j", weighted, residual)
-        try:
-            step = -np.linalg.solve(hessian, gradient)
-        except np.linalg.LinAlgError:
-            break  # degenerate geometry: keep the current fit
-        yaw += float(step[0])
-        translation += step[1:]
-        if np.abs(step).max() < 1e-9:
-            break
-    residual = _residuals(q, s, yaw, translation)
-    weights = _inverse_2x2(_pair_covariances(query_cov, stored_cov, yaw, floor))
-    d2 = np.einsum("ki,kij,kj->k", residual, weights, residual)
-    rotation = np.eye(3)
-    rotation[:2, :2] = _yaw_rotation(yaw)
-    height = float(np.mean(stored[:, 2] - query[:, 2]))
-    transform = make_pose(rotation, np.array([translation[0], translation[1], height]))
-    return FitResult(transform, yaw, d2, np.linalg.norm(residual, axis=1))
+    ground-plane covariances), by Gauss-Newton from the unweighted least-squares fit; the height offset is the mean
+    one (objects' heights say little about a place)."""
+    return _fit_pairs(_pair_columns(query, stored, query_cov, stored_cov, centre_sigma))
 
 
 def trimmed_fit(
@@ -165,8 +210,9 @@ def trimmed_fit(
     else:
         q_cov, s_cov = query.covariances[pairs[:, 0]], stored.covariances[pairs[:, 1]]
         sigma = config.centre_sigma
+    columns = _pair_columns(q_all, s_all, q_cov, s_cov, sigma)
     while inliers.sum() >= max(needed, 2):
-        fit = fit_weighted(q_all[inliers], s_all[inliers], q_cov[inliers], s_cov[inliers], sigma)
+        fit = _fit_pairs(columns[inliers])
         if config.tolerances == "fixed":
             excess = fit.distances / config.inlier_distance
         else:
