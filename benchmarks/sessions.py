@@ -36,9 +36,12 @@ evaluation's loop_max_distance (5 m, horizontally). Ground truth is read here fo
 7. Lifelong mapping: one route (KITTI 00's ground truth cut where it comes back to its start) driven 1, 2 and 4 times
    in one session, each drive in a fresh process: the map must end the same, not a growing copy of it
    (benchmarks._lifelong).
+8. Real images, later sessions that start part way into the mapped street: A = kitti_06_51's map; B from frames 10,
+   20 and 30 forward, with the third pass's photometric change or a darker, noisier one, each into A's map with
+   --localise-only (benchmarks._real_later_sessions).
 
     python -m benchmarks.sessions [--quick] [--out FILE] [--seed 1] [--kills 20] [--repeats 3]
-                                  [--parts 1 2 3 4 5 6 7] [--keep DIR]
+                                  [--parts 1 2 3 4 5 6 7 8] [--keep DIR]
 
 `--quick`: B of part 1 only to frame 1599, 08 to frame 399, 5 kills, one cost run each, the lifelong drives on the
 built-in block route.
@@ -65,7 +68,8 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from benchmarks import _lifelong, harness
+from benchmarks import _lifelong, _real_later_sessions, harness
+from benchmarks._real_later_sessions import Rebased
 from benchmarks.harness import data_root
 from benchmarks.real_streets import THIRD_PASS
 from neoslam.commands.simulate import simulate_dataset
@@ -76,7 +80,7 @@ from neoslam.datasets.kitti_writer import write_kitti_sequence
 from neoslam.datasets.replay import ReplayedSequence
 from neoslam.datasets.simulated import read_dataset
 from neoslam.evaluation.trajectory_metrics import absolute_trajectory_error, align, associate
-from neoslam.geometry import SimilarityTransform, invert_pose, yaw_pitch_roll
+from neoslam.geometry import SimilarityTransform, yaw_pitch_roll
 from neoslam.io.trajectory_files import read_trajectory, read_tum
 from neoslam.pipeline import run
 from neoslam.sim.session_drives import session_recordings
@@ -100,7 +104,7 @@ RUN_TIMEOUT_S = 1800.0
 
 
 QUICK = "B of part 1 only to frame 1599, 08 to frame 399, 5 kills, one cost run each; part 7 on the block route"
-PARTS = [1, 2, 3, 4, 5, 6, 7]
+PARTS = [1, 2, 3, 4, 5, 6, 7, 8]
 
 
 def arguments(parser: argparse.ArgumentParser) -> None:
@@ -506,32 +510,6 @@ def part_never_meet(setup: Setup) -> dict[str, Any]:
     return {"values": result, "targets": targets}
 
 
-@dataclass(frozen=True)
-class _Rebased:
-    """A replay whose ground truth starts at the identity (as KITTI's does): its poses relative to its first."""
-
-    replay: ReplayedSequence
-
-    @property
-    def camera(self):
-        return self.replay.camera
-
-    @property
-    def timestamps(self) -> np.ndarray:
-        return self.replay.timestamps
-
-    @property
-    def ground_truth(self) -> Trajectory:
-        truth = self.replay.ground_truth
-        return Trajectory(truth.timestamps, invert_pose(truth.poses[0]) @ truth.poses)
-
-    def __len__(self) -> int:
-        return len(self.replay)
-
-    def stereo_pair(self, index: int):
-        return self.replay.stereo_pair(index)
-
-
 def part_real_images(setup: Setup) -> dict[str, Any]:
     folder = setup.work / "p3"
     folder.mkdir(exist_ok=True)
@@ -542,7 +520,7 @@ def part_real_images(setup: Setup) -> dict[str, Any]:
     replay = ReplayedSequence(base, order, (THIRD_PASS,) * len(order), label="back-forward")
     root_b = folder / "kitti_b"
     if not root_b.exists():
-        write_kitti_sequence(root_b, "06", _Rebased(replay))
+        write_kitti_sequence(root_b, "06", Rebased(replay))
     map_path = folder / "map.neoslam"
     metrics_a, wall_a = _run(root, folder / "RA", map_path, ["--sequence", "06"])
     metrics_b, wall_b = _run(root_b, folder / "RB", map_path, ["--sequence", "06"])
@@ -791,6 +769,7 @@ TITLES = {
     5: "5. Cost of the map file",
     6: "6. A session that starts in the middle of the map (KITTI 05 frames 500-799 into A's map)",
     7: "7. Lifelong mapping: one route driven again and again",
+    8: "8. Real images: later sessions that start part way into the mapped street of kitti_06_51",
 }
 
 
@@ -813,6 +792,7 @@ def main(argv: list[str] | None = None) -> None:
             4: lambda: part_crash(setup, kills),
             5: lambda: part_cost(setup, repeats),
             6: lambda: part_mid_map(setup),
+            8: lambda: _real_later_sessions.run_part(setup.work / "p8", _run),
         }
         results: dict[str, Any] = {}
         for number in sorted(args.parts):
@@ -837,6 +817,8 @@ def main(argv: list[str] | None = None) -> None:
                 columns = ["kill", "kill at s", "killed", "opens", "integrity", "keyframes", "prefix", "complete",
                            "session frames", "results folder"]  # fmt: skip
                 bench.table(f"part{number}_runs", part["rows"], columns)
+            if "sessions" in part:
+                bench.table(f"part{number}_sessions", part["sessions"], list(part["sessions"][0]))
             results[str(number)] = part
     bench.finish({"seed": args.seed, "parts": json.loads(json.dumps(results, default=str))})
 

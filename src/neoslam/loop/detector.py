@@ -36,6 +36,13 @@ class _Relocalisation:
     closure: LoopClosure
     evidence: float = 0.0  # bits (loop.verification.evidence_bits)
     members: tuple[int, ...] = ()  # the stored keyframes of the place matched
+    objects: np.ndarray | None = None  # (k, 2) the matched stored objects' ground positions, stored world
+    queried: np.ndarray | None = None  # (k, 2) the query objects matched to them, query world
+    labels: tuple[str, ...] = ()  # their labels
+    bits: np.ndarray | None = None  # (k,) each matched pair's bits (loop.verification.pair_evidence)
+    spent: float = 0.0  # the bits fixing the fit spent
+    contradicted: np.ndarray | None = None  # (m, 2) the contradicted objects' ground positions, stored world
+    contradicted_labels: tuple[str, ...] = ()
 
 
 class _JoinedPlaces:
@@ -123,6 +130,15 @@ class LoopClosureDetector:
         """The verified place match with the most evidence among the retrieval candidates (each tried once as a
         place), pinned to the member nearest to where the fit puts the robot; None when none verifies, or when
         another place, not joined to it, verifies with nearly as much evidence."""
+        return self._unambiguous(self._verified(keyframe, odometer_m))
+
+    def _tested(self, eligible: int) -> int:
+        """The number of places a keyframe's evidence is weighed against (log2 of it is added to the bits needed):
+        every eligible stored keyframe."""
+        return eligible
+
+    def _verified(self, keyframe: Keyframe, odometer_m: float) -> list[_Relocalisation]:
+        """Every retrieval candidate's place (each tried once) in which the keyframe relocalises."""
         eligible = self.index.eligible(keyframe.pose[:3, 3], odometer_m)
         query = self._query_window(keyframe)
         if not self._queried or self._queried[-1].id != keyframe.id:
@@ -146,7 +162,7 @@ class LoopClosureDetector:
             relocalisation = self._relocalisation(side, place, eligible, odometer_m)
             if relocalisation is not None:
                 found.append(relocalisation)
-        return self._unambiguous(found)
+        return found
 
     def _query_window(self, keyframe: Keyframe) -> Keyframe:
         """The keyframe with the keyframes queried just before it (ids one less each) whose robot poses lie within
@@ -172,7 +188,8 @@ class LoopClosureDetector:
         too far from the place's keyframes, off its level, or turned more than the odometry can drift; `eligible`:
         the ids (increasing) of the stored keyframes it may close a loop with."""
         keyframe = query.keyframe
-        match = self._match(query, place.side(self.config), len(eligible))
+        tested = self._tested(len(eligible))
+        match = self._match(query, place.side(self.config), tested)
         members = np.asarray(place.members, dtype=int)
         found = np.minimum(np.searchsorted(eligible, members), max(len(eligible) - 1, 0))
         members = members[eligible[found] == members] if len(eligible) else members[:0]
@@ -180,7 +197,7 @@ class LoopClosureDetector:
             return None
         nearest = self.index.nearest((match.transform @ keyframe.pose)[:3, 3], members)
         evidence = match.evidence + self._drift_bits(keyframe, match.transform, nearest, odometer_m)
-        needed = self.config.min_evidence_bits + np.log2(max(len(eligible), 1))
+        needed = self.config.min_evidence_bits + np.log2(max(tested, 1))
         if self.config.tolerances == "covariance" and evidence < needed:
             return None
         match = replace(match, match=nearest, evidence=evidence)
@@ -190,7 +207,13 @@ class LoopClosureDetector:
         if not (same_place and level and self._plausible_turn(match, odometer_m)):
             return None
         position = keyframe.pose[:3, 3].copy()
-        return _Relocalisation(keyframe.id, position, match.transform, closure, match.evidence, place.members)
+        stored = place.keyframe.centers[match.pairs[:, 1], :2]
+        queried = keyframe.centers[match.pairs[:, 0], :2]
+        labels = tuple(place.keyframe.labels[i] for i in match.pairs[:, 1])
+        return _Relocalisation(
+            keyframe.id, position, match.transform, closure, match.evidence, place.members, stored, queried, labels,
+            match.pair_bits, match.spent_bits, match.contradicted, match.contradicted_labels,
+        )  # fmt: skip
 
     def _unambiguous(self, found: list[_Relocalisation]) -> _Relocalisation | None:
         """The relocalisation with the most evidence (or the best in the pass the previous keyframe relocalised in),
@@ -266,7 +289,9 @@ class LoopClosureDetector:
         current = self.relocalise(keyframe, odometer_m)
         history = list(self._recent)
         self._recent.append(current)
-        if current is None or any(h is None or not self._consistent(h, current) for h in history):
+        if current is None or len(history) < (self._recent.maxlen or 0):
+            return []  # the detector's first keyframes: not yet the consecutive ones a closure needs
+        if any(h is None or not self._consistent(h, current) for h in history):
             return []
         if any(h.keyframe_id != keyframe.id - len(history) + i for i, h in enumerate(history)):
             return []  # not consecutive keyframes

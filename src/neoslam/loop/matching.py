@@ -34,7 +34,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from neoslam.config import MatchingConfig
-from neoslam.loop.verification import contradictions, evidence_bits, fit_consistent, trimmed_fit
+from neoslam.loop.verification import (
+    contradicted_objects,
+    contradictions,
+    evidence_from,
+    fit_consistent,
+    pair_evidence,
+    trimmed_fit,
+)
 from neoslam.types import Keyframe
 
 __all__ = [
@@ -64,6 +71,10 @@ class KeyframeMatch:
     verified: bool
     verified_score: float  # the score over the verified pairs only; 0 when the match is not verified
     evidence: float = 0.0  # bits that the fit shows one place (loop.verification); 0 when it got no fit
+    pair_bits: np.ndarray | None = None  # (k,) each verified pair's bits (loop.verification.pair_evidence)
+    spent_bits: float = 0.0  # what fixing the fit spent of them
+    contradicted: np.ndarray | None = None  # (m, 2) ground positions of the contradicted objects, stored world
+    contradicted_labels: tuple[str, ...] = ()
 
     @property
     def n_matches(self) -> int:
@@ -254,8 +265,10 @@ def match_keyframes(
     if fit is None or len(pairs) < needed:
         return _unverified(query, stored, score, pairs)
     residual_rms = float(np.sqrt(np.mean(fit.distances**2)))
-    contradicted = contradictions(query, stored, fit.transform, config)
-    evidence = evidence_bits(query, stored, pairs, fit, contradicted, label_shares, config)
+    against, against_labels = contradicted_objects(query, stored, fit.transform, config)
+    contradicted = len(against_labels)
+    bits, spent = pair_evidence(query, stored, pairs, fit, label_shares, config)
+    evidence = evidence_from(bits, spent, contradicted, config)
     verified = bool(
         fit_consistent(fit, config)
         and contradicted <= config.max_contradictions
@@ -263,5 +276,6 @@ def match_keyframes(
     )
     verified_score = float(affinity[np.ix_(kept, kept)].sum() / e_max) if verified else 0.0
     return KeyframeMatch(
-        query.id, stored.id, score, pairs, fit.transform, residual_rms, verified, verified_score, evidence
-    )
+        query.id, stored.id, score, pairs, fit.transform, residual_rms, verified, verified_score, evidence, bits, spent,
+        against, against_labels,
+    )  # fmt: skip

@@ -49,9 +49,12 @@ __all__ = [
     "trimmed_fit",
     "fit_consistent",
     "contradictions",
+    "contradicted_objects",
     "has_counterpart",
     "chi2_bound",
+    "pair_evidence",
     "evidence_bits",
+    "evidence_from",
 ]
 
 GAUSS_NEWTON_STEPS = 2  # the weighted fit starts at the unweighted one, a step or two from its optimum
@@ -272,11 +275,18 @@ def contradictions(query: Keyframe, stored: Keyframe, transform: np.ndarray, con
     """Objects of either keyframe that the fit (query world -> stored world) puts at least `contradiction_margin`
     inside the other keyframe's ground with no counterpart there (has_counterpart); provisional objects (not known
     to be static) are not counted."""
+    return len(contradicted_objects(query, stored, transform, config)[1])
+
+
+def contradicted_objects(
+    query: Keyframe, stored: Keyframe, transform: np.ndarray, config: MatchingConfig
+) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The contradicted objects (contradictions): their ground positions (m, 2) in the stored world, and labels."""
     moved = transform_points(transform, query.centers)
     moved_cov = _turned(query.covariances, transform)
     query_centre, query_radius = _ground(moved, (transform @ query.pose)[:3, 3])
     stored_centre, stored_radius = _ground(stored.centers, stored.pose[:3, 3])
-    count = 0
+    positions, names = [], []
     for points, labels, cov, known, others, other_labels, other_cov, centre, radius in (
         (moved, query.labels, moved_cov, ~query.provisional, stored.centers, stored.labels, stored.covariances,
          stored_centre, stored_radius),
@@ -286,8 +296,34 @@ def contradictions(query: Keyframe, stored: Keyframe, transform: np.ndarray, con
         inside = known & (np.linalg.norm(points[:, :2] - centre, axis=1) <= radius - config.contradiction_margin)
         labels_inside = np.asarray(labels)[inside]
         found = has_counterpart(points[inside], labels_inside, cov[inside], others, other_labels, other_cov, config)
-        count += int((~found).sum())
-    return count
+        positions.append(points[inside][~found, :2])
+        names.extend(labels_inside[~found].tolist())
+    return np.concatenate(positions), tuple(names)
+
+
+def pair_evidence(
+    query: Keyframe,
+    stored: Keyframe,
+    pairs: np.ndarray,
+    fit: FitResult,
+    label_shares: dict[str, float] | None,
+    config: MatchingConfig,
+) -> tuple[np.ndarray, float]:
+    """Each inlier pair's bits (k,) and the bits spent fixing the fit's parameters (module docstring): the evidence
+    before contradictions is their sum minus what was spent. `label_shares`: each label's share among the stored
+    objects (None or a missing label: 1, nothing from labels). A pair gives no negative evidence: a stranger in the
+    gate is as likely as a bad fit of a right one."""
+    covariances = pair_covariances(
+        query.covariances[pairs[:, 0]], stored.covariances[pairs[:, 1]], fit.yaw, config.centre_sigma
+    )
+    shares = label_shares or {}
+    label_bits = -np.log2([shares.get(query.labels[i], 1.0) for i in pairs[:, 0]])
+    likelihood = np.exp(-0.5 * fit.d2) / (2.0 * np.pi * np.sqrt(np.linalg.det(covariances)))  # N(r; 0, C)
+    place_bits = np.log2(likelihood * config.object_area)  # against one object per object_area m², any label
+    bits = np.maximum(place_bits + label_bits, 0.0)
+    # fixing the fit's 3 parameters took where the best pair and half the next stand, not what they are
+    spent = np.sort(np.clip(place_bits, 0.0, bits))[::-1]
+    return bits, float(spent[0] + 0.5 * spent[1] if len(spent) > 1 else spent.sum())
 
 
 def evidence_bits(
@@ -299,18 +335,13 @@ def evidence_bits(
     label_shares: dict[str, float] | None,
     config: MatchingConfig,
 ) -> float:
-    """The evidence (bits) that the inlier pairs (k, 2), with the fit's d², show one place (module docstring);
-    `label_shares`: each label's share among the stored objects (None or a missing label: 1, nothing from labels).
-    A pair gives no negative evidence: a stranger in the gate is as likely as a bad fit of a right one."""
-    covariances = pair_covariances(
-        query.covariances[pairs[:, 0]], stored.covariances[pairs[:, 1]], fit.yaw, config.centre_sigma
-    )
-    shares = label_shares or {}
-    label_bits = -np.log2([shares.get(query.labels[i], 1.0) for i in pairs[:, 0]])
-    likelihood = np.exp(-0.5 * fit.d2) / (2.0 * np.pi * np.sqrt(np.linalg.det(covariances)))  # N(r; 0, C)
-    place_bits = np.log2(likelihood * config.object_area)  # against one object per object_area m², any label
-    bits = np.maximum(place_bits + label_bits, 0.0)
-    # fixing the fit's 3 parameters took where the best pair and half the next stand, not what they are
-    spent = np.sort(np.clip(place_bits, 0.0, bits))[::-1]
-    spent_bits = spent[0] + 0.5 * spent[1] if len(spent) > 1 else spent.sum()
-    return float(bits.sum() - spent_bits - config.contradiction_bits * contradicted)
+    """The evidence (bits) that the inlier pairs (k, 2), with the fit's d², show one place (module docstring):
+    pair_evidence, less `contradiction_bits` for each of the `contradicted` objects."""
+    bits, spent = pair_evidence(query, stored, pairs, fit, label_shares, config)
+    return evidence_from(bits, spent, contradicted, config)
+
+
+def evidence_from(bits: np.ndarray, spent: float, contradicted: int, config: MatchingConfig) -> float:
+    """A match's evidence from its pairs' bits and what fixing the fit spent (pair_evidence), less
+    `contradiction_bits` for each contradicted object."""
+    return float(bits.sum() - spent - config.contradiction_bits * contradicted)
