@@ -189,7 +189,7 @@ class LoopClosureDetector:
         the ids (increasing) of the stored keyframes it may close a loop with."""
         keyframe = query.keyframe
         tested = self._tested(len(eligible))
-        match = self._match(query, place.side(self.config), tested)
+        match = self._match(query, place.keyframe, tested)
         members = np.asarray(place.members, dtype=int)
         found = np.minimum(np.searchsorted(eligible, members), max(len(eligible) - 1, 0))
         members = members[eligible[found] == members] if len(eligible) else members[:0]

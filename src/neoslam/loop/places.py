@@ -15,13 +15,11 @@ the query window, loop.detector).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from neoslam.config import MatchingConfig
 from neoslam.loop.index import StoredKeyframes
-from neoslam.loop.matching import MatchSide, match_side
 from neoslam.types import Keyframe
 
 __all__ = ["Place", "merge_keyframes", "PlaceCache"]
@@ -33,14 +31,6 @@ class Place:
 
     keyframe: Keyframe
     members: tuple[int, ...]
-    _sides: list[tuple[MatchingConfig, MatchSide]] = field(default_factory=list, compare=False, repr=False)
-
-    def side(self, config: MatchingConfig) -> MatchSide:
-        """The place's side of matching (loop.matching.match_side), worked out once for the queries that match it
-        while the place is cached (a stored place is matched by many)."""
-        if not self._sides or self._sides[0][0] is not config:
-            self._sides[:] = [(config, match_side(self.keyframe, config))]
-        return self._sides[0][1]
 
 
 def _kept_objects(
