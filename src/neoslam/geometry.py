@@ -41,6 +41,7 @@ __all__ = [
     "body_velocities",
     "planar_motion",
     "fit_yaw_translation",
+    "least_squares_yaw",
 ]
 
 
@@ -234,6 +235,13 @@ def planar_motion(previous: np.ndarray, current: np.ndarray) -> tuple[float, flo
     return direction * float(np.hypot(step[0], step[1])), yaw_change, float(step[2])
 
 
+def least_squares_yaw(source: np.ndarray, target: np.ndarray) -> float:
+    """The yaw (rad) of the rotation that best takes (n, 2) ground-plane points onto (n, 2) others, both sets
+    centred on their means (least squares, closed form)."""
+    cross = (source[:, 0] * target[:, 1] - source[:, 1] * target[:, 0]).sum()
+    return float(np.arctan2(cross, (source * target).sum()))
+
+
 def fit_yaw_translation(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     """4-DoF least squares (rotation about z, translation): the (4, 4) T with target ≈ T source, for (n, 3) points.
 
@@ -243,8 +251,7 @@ def fit_yaw_translation(source: np.ndarray, target: np.ndarray) -> np.ndarray:
     if source.shape != target.shape or len(source) < 2:
         raise ValueError(f"need two (n >= 2, 3) point sets of equal shape, got {source.shape} and {target.shape}")
     mean_src, mean_tgt = source.mean(axis=0), target.mean(axis=0)
-    src, tgt = source[:, :2] - mean_src[:2], target[:, :2] - mean_tgt[:2]
-    yaw = np.arctan2((src[:, 0] * tgt[:, 1] - src[:, 1] * tgt[:, 0]).sum(), (src * tgt).sum())
+    yaw = least_squares_yaw(source[:, :2] - mean_src[:2], target[:, :2] - mean_tgt[:2])
     rotation = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
     return make_pose(rotation, mean_tgt - rotation @ mean_src)
 

@@ -36,13 +36,8 @@ class _Relocalisation:
     closure: LoopClosure
     evidence: float = 0.0  # bits (loop.verification.evidence_bits)
     members: tuple[int, ...] = ()  # the stored keyframes of the place matched
-    objects: np.ndarray | None = None  # (k, 2) the matched stored objects' ground positions, stored world
-    queried: np.ndarray | None = None  # (k, 2) the query objects matched to them, query world
-    labels: tuple[str, ...] = ()  # their labels
-    bits: np.ndarray | None = None  # (k,) each matched pair's bits (loop.verification.pair_evidence)
-    spent: float = 0.0  # the bits fixing the fit spent
-    contradicted: np.ndarray | None = None  # (m, 2) the contradicted objects' ground positions, stored world
-    contradicted_labels: tuple[str, ...] = ()
+    match: KeyframeMatch | None = None  # the verified match: its pairs, their bits, the objects it contradicts
+    sides: tuple[Keyframe, Keyframe] | None = None  # the query (window) and the place its pairs index
 
 
 class _JoinedPlaces:
@@ -207,12 +202,9 @@ class LoopClosureDetector:
         if not (same_place and level and self._plausible_turn(match, odometer_m)):
             return None
         position = keyframe.pose[:3, 3].copy()
-        stored = place.keyframe.centers[match.pairs[:, 1], :2]
-        queried = keyframe.centers[match.pairs[:, 0], :2]
-        labels = tuple(place.keyframe.labels[i] for i in match.pairs[:, 1])
         return _Relocalisation(
-            keyframe.id, position, match.transform, closure, match.evidence, place.members, stored, queried, labels,
-            match.pair_bits, match.spent_bits, match.contradicted, match.contradicted_labels,
+            keyframe.id, position, match.transform, closure, match.evidence, place.members, match,
+            (keyframe, place.keyframe),
         )  # fmt: skip
 
     def _unambiguous(self, found: list[_Relocalisation]) -> _Relocalisation | None:

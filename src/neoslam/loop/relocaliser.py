@@ -159,23 +159,22 @@ class MapRelocaliser(LoopClosureDetector):
         contradicted that none before did."""
         best = max(range(len(run)), key=lambda k: run[k].evidence)
         radius = self.places.association_radius
-        matched = list(zip(run[best].labels, run[best].objects, run[best].queried, strict=True))
-        against = list(zip(run[best].contradicted_labels, run[best].contradicted, strict=True))
+        matched = [pair[:3] for pair in _matched_pairs(run[best])]
+        against = list(zip(run[best].match.contradicted_labels, run[best].match.contradicted, strict=True))
         bits = run[best].evidence
         for k, step in enumerate(run):
             if k == best:
                 continue
             new = 0.0
-            for i in np.argsort(-step.bits, kind="stable").tolist():
-                label, stored, queried = step.labels[i], step.objects[i], step.queried[i]
+            for label, stored, queried, pair_bits in sorted(_matched_pairs(step), key=lambda pair: -pair[3]):
                 if not any(
                     label == other and (math.dist(stored, at) <= radius or math.dist(queried, seen) <= radius)
                     for other, at, seen in matched
                 ):
                     matched.append((label, stored, queried))
-                    new += float(step.bits[i])
-            bits += max(new - min(step.spent, self._later_spent_cap), 0.0)
-            for label, at in zip(step.contradicted_labels, step.contradicted, strict=True):
+                    new += pair_bits
+            bits += max(new - min(step.match.spent_bits, self._later_spent_cap), 0.0)
+            for label, at in zip(step.match.contradicted_labels, step.match.contradicted, strict=True):
                 if not any(label == other and math.dist(at, there) <= radius for other, there in against):
                     against.append((label, at))
                     bits -= self.config.contradiction_bits
@@ -190,6 +189,16 @@ class MapRelocaliser(LoopClosureDetector):
     def _closure(self, query: Keyframe, match: KeyframeMatch) -> tuple[LoopClosure, np.ndarray]:
         closure, offset = super()._closure(query, match)
         return replace(closure, relative_pose=_levelled(closure.relative_pose)), offset
+
+
+def _matched_pairs(step: _Relocalisation) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
+    """Each verified pair of a relocalisation: its label, the stored object's ground position (stored world), the
+    query object's (query world) and the pair's bits."""
+    query, place = step.sides
+    return [
+        (place.labels[j], place.centers[j, :2], query.centers[i, :2], float(bits))
+        for (i, j), bits in zip(step.match.pairs.tolist(), step.match.pair_bits, strict=True)
+    ]
 
 
 def _levelled(relative: np.ndarray) -> np.ndarray:

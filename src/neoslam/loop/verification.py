@@ -39,7 +39,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from neoslam.config import MatchingConfig
-from neoslam.geometry import transform_points
+from neoslam.geometry import least_squares_yaw, transform_points
 from neoslam.types import Keyframe
 
 __all__ = [
@@ -146,9 +146,9 @@ def _residuals(pairs: np.ndarray, c: float, s: float, tx: float, ty: float) -> t
 def _unweighted_start(pairs: np.ndarray) -> tuple[float, float, float]:
     """Yaw and translation (x, y) of the plain least-squares fit (geometry.fit_yaw_translation, ground plane)."""
     means = pairs[:, :4].mean(axis=0)
-    qx, qy = pairs[:, _QX] - means[_QX], pairs[:, _QY] - means[_QY]
-    sx, sy = pairs[:, _SX] - means[_SX], pairs[:, _SY] - means[_SY]
-    yaw = math.atan2(float((qx * sy - qy * sx).sum()), float((qx * sx + qy * sy).sum()))
+    yaw = least_squares_yaw(
+        pairs[:, _QX : _QY + 1] - means[_QX : _QY + 1], pairs[:, _SX : _SY + 1] - means[_SX : _SY + 1]
+    )
     c, s = math.cos(yaw), math.sin(yaw)
     return yaw, means[_SX] - (c * means[_QX] - s * means[_QY]), means[_SY] - (s * means[_QX] + c * means[_QY])
 
