@@ -19,6 +19,7 @@ __all__ = [
     "ObjectObservation",
     "Frame",
     "Keyframe",
+    "moved_views",
     "Experience",
     "LoopClosure",
     "Trajectory",
@@ -77,6 +78,9 @@ class Keyframe:
     # (n, 2, 2) ground-plane covariance of each centre as its views give it, m²; None: zeros (matching adds its
     # own floor, matching.centre_sigma, to every object)
     covariances: np.ndarray | None = None
+    # (m, 3) ground position and heading (x, y, yaw) of the robot where the keyframe's objects were seen from: a
+    # keyframe merged from several (loop.places) was seen from each of theirs; None: its own pose
+    views: np.ndarray | None = None
     distances: np.ndarray = field(init=False)  # (n, n) pairwise e_ij, eq. 1
 
     def __post_init__(self) -> None:
@@ -87,6 +91,8 @@ class Keyframe:
         if covariances.shape != (n, 2, 2):
             raise ValueError(f"keyframe {self.id}: covariances of shape {covariances.shape}, not ({n}, 2, 2)")
         object.__setattr__(self, "covariances", covariances)
+        views = _ground_pose(self.pose)[None] if self.views is None else np.asarray(self.views, dtype=float)
+        object.__setattr__(self, "views", views)
         # np.linalg.norm(centres[:, None] - centres[None], axis=-1) written out, its sums in its order: many times
         # faster, by coordinate
         total = 0.0
@@ -108,7 +114,19 @@ class Keyframe:
             self.patches,
             self.provisional,
             turn @ self.covariances @ turn.T,
+            moved_views(self.views, transform),
         )
+
+
+def moved_views(views: np.ndarray, transform: np.ndarray) -> np.ndarray:
+    """Views (m, 3) of x, y, yaw moved to another frame by `transform` (4, 4), turned by its yaw."""
+    turn = transform[:2, :2]
+    return np.column_stack([views[:, :2] @ turn.T + transform[:2, 3], views[:, 2] + np.arctan2(turn[1, 0], turn[0, 0])])
+
+
+def _ground_pose(pose: np.ndarray) -> np.ndarray:
+    """(x, y, yaw) of a pose T_world_robot: the robot's x axis is its heading."""
+    return np.array([pose[0, 3], pose[1, 3], np.arctan2(pose[1, 0], pose[0, 0])])
 
 
 @dataclass(slots=True)

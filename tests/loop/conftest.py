@@ -26,6 +26,7 @@ def keyframe(
     pose: np.ndarray | None = None,
     id: int = 0,
     frame_index: int = 0,
+    views: np.ndarray | None = None,
 ) -> Keyframe:
     centers = np.asarray(centers, dtype=float).reshape(-1, 3)
     if patches is None:  # one plain grey level per object: all alike in appearance
@@ -37,6 +38,7 @@ def keyframe(
         centers=centers,
         labels=tuple(labels),
         patches=patches,
+        views=views,
     )
 
 

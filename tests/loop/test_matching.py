@@ -447,12 +447,15 @@ def test_a_street_that_shares_only_part_of_the_layout_is_not_a_place(make_keyfra
     # Nine of twelve parked cars stand where the stored ones do (a street elsewhere, parked alike); in the middle,
     # where the stored street has three more cars, the query's has three people. The nine fit exactly and make 75 %
     # of the smaller keyframe, which all the other checks accept.
+    # Both streets are seen from poses along them (merged keyframes, loop.places), so the middle is in view of both.
     motion = make_yaw_pose(np.radians(20.0), (500.0, 200.0, 0.0))
-    stored = _street_keyframe(make_keyframe, STREET)
+    views = np.column_stack([[-10.0, 0.0, 10.0, 20.0], np.zeros(4), np.zeros(4)])
+    stored = make_keyframe(STREET, ["car"] * len(STREET), pose=ROBOT, views=views)
     shared = [0, 1, 2, 3, 4, 8, 9, 10, 11]
     people = np.array([[21.0, -8.0, 0.0], [26.0, 8.5, 0.0], [31.0, -8.0, 0.0]])
     centres = transform_points(motion, np.vstack([STREET[shared], people]))
-    query = make_keyframe(centres, ["car"] * 9 + ["person"] * 3, pose=motion @ ROBOT)
+    moved_views = make_keyframe(STREET[:1], ["car"], pose=ROBOT, views=views).moved(motion).views
+    query = make_keyframe(centres, ["car"] * 9 + ["person"] * 3, pose=motion @ ROBOT, views=moved_views)
 
     lenient = match_keyframes(query, stored, TOLERANT, E_MAX)
     assert lenient.verified and lenient.n_matches == 9
@@ -505,3 +508,33 @@ def test_a_provisional_stranger_is_no_contradiction(make_keyframe) -> None:
     assert contradictions(query, stored, np.eye(4), CONFIG) == 1
     marked = Keyframe(0, 0, query.pose, centres, tuple(labels), query.patches, np.arange(len(labels)) == len(STREET))
     assert contradictions(marked, stored, np.eye(4), CONFIG) == 0
+
+
+def test_only_contradictions_in_view_count_against_the_cap_and_the_others_cost_less(make_keyframe) -> None:
+    # Seen from the middle of the street only (one pose, heading +x): the stored street's middle cars beside and
+    # behind the robot are out of its view, those far ahead in it. The query misses five cars out of view; the
+    # stored keyframe sees far enough to hold them all.
+    stored = _street_keyframe(make_keyframe, STREET)
+    missed = [4, 5, 6, 7, 8]  # x = 20 .. 37, beside the robot at x = 27.5
+    kept = [i for i in range(len(STREET)) if i not in missed]
+    query = _street_keyframe(make_keyframe, STREET[kept])
+    robot = ROBOT[:2, 3]
+    off_axis = np.degrees(np.abs(np.arctan2(*(STREET[missed, :2] - robot).T[::-1])))
+    assert (off_axis > CONFIG.contradiction_view_deg).all()
+    against, labels, in_view = verification.contradicted_objects(query, stored, np.eye(4), CONFIG)
+    assert len(labels) == len(missed) and not in_view.any()
+    match = match_keyframes(query, stored, CONFIG, E_MAX)
+    assert match.verified  # five contradictions, none in view: under max_contradictions (4)
+    everywhere = CONFIG.model_copy(update={"contradiction_view_deg": 180.0})
+    assert not match_keyframes(query, stored, everywhere, E_MAX).verified
+    in_full = CONFIG.model_copy(update={"out_of_view_contradiction_bits": CONFIG.contradiction_bits})
+    cost = CONFIG.contradiction_bits - CONFIG.out_of_view_contradiction_bits
+    full = match_keyframes(query, stored, in_full.model_copy(update={"max_contradictions": 100}), E_MAX)
+    assert match.evidence - full.evidence == pytest.approx(cost * len(missed))
+
+
+def test_a_point_is_in_view_within_the_angle_of_one_of_the_views() -> None:
+    views = np.array([[0.0, 0.0, 0.0], [10.0, 0.0, np.pi / 2]])  # facing +x at the origin, +y at (10, 0)
+    points = np.array([[20.0, 5.0], [-20.0, 0.0], [10.0, 30.0], [12.0, -10.0]])
+    assert verification.in_view(points, views, 30.0).tolist() == [True, False, True, False]
+    assert verification.in_view(points, views, 180.0).all()

@@ -40,6 +40,16 @@ def test_the_same_object_in_two_keyframes_is_one_the_best_known_estimate() -> No
     assert merged.patches[order[0]].mean() == 101 and merged.patches[order[1]].mean() == 100
 
 
+def test_a_merged_keyframe_was_seen_from_every_member_and_moves_with_its_objects() -> None:
+    first = _keyframe(0, 0.0, [[5.0, 5.0, 0.0]], ["car"])
+    second = _keyframe(1, 5.0, [[12.0, -5.0, 0.0]], ["car"])
+    merged = merge_keyframes([first, second], second, association_radius=2.5)
+    np.testing.assert_allclose(merged.views, [[0.0, 0.0, 0.0], [5.0, 0.0, 0.0]])
+    turn = make_pose(np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]), np.array([100.0, 0.0, 0.0]))
+    moved = merged.moved(turn)  # a quarter turn, then 100 m along x
+    np.testing.assert_allclose(moved.views, [[100.0, 0.0, np.pi / 2], [100.0, 5.0, np.pi / 2]], atol=1e-12)
+
+
 def test_a_merged_object_is_provisional_only_when_every_estimate_is() -> None:
     first = _keyframe(0, 0.0, [[5.0, 5.0, 0.0], [15.0, 5.0, 0.0]], ["car", "car"], provisional=[True, True])
     second = _keyframe(1, 5.0, [[5.2, 5.0, 0.0], [15.2, 5.0, 0.0]], ["car", "car"], provisional=[False, True])

@@ -18,6 +18,7 @@ SESSION_X = np.arange(12.0, 130.0, 12.0)  # a session keyframe every 12 m: no qu
 VARIANCE = 0.5  # m², each object centre's ground-plane variance: far objects, a few bits each
 SEEN = 6  # objects a session keyframe sees of those near it: its evidence alone is often under the whole map's
 SESSIONS = range(8)
+SEEN_FROM = np.array([30.0, 20.0, 10.0, 0.0])  # m behind a keyframe's robot, where its objects were seen from
 
 
 def _keyframe(make_keyframe, street, rng, x, frame, id, seen=None) -> Keyframe:
@@ -29,8 +30,11 @@ def _keyframe(make_keyframe, street, rng, x, frame, id, seen=None) -> Keyframe:
     pose[:3, 3] = transform_points(frame, np.array([[x, 0.0, 1.65]]))[0]
     keyframe = make_keyframe(centres, [street.labels[i] for i in near], street.patches(rng, near), pose, id, id)
     covariances = np.tile(VARIANCE * np.eye(2), (len(near), 1, 1))
+    # seen from the robot's poses as it drove up the street to x: its objects ahead of one of them
+    behind = transform_points(frame, np.column_stack([x - SEEN_FROM, 0.0 * SEEN_FROM, 0.0 * SEEN_FROM]))
+    views = np.column_stack([behind[:, :2], np.full(len(SEEN_FROM), np.arctan2(frame[1, 0], frame[0, 0]))])
     return Keyframe(
-        keyframe.id, keyframe.frame_index, pose, centres, keyframe.labels, keyframe.patches, None, covariances
+        keyframe.id, keyframe.frame_index, pose, centres, keyframe.labels, keyframe.patches, None, covariances, views
     )
 
 

@@ -136,6 +136,14 @@ class MatchingConfig(Section):
     contradiction_bits: float = Field(
         4.0, ge=0, le=1000, description="with tolerances covariance: evidence a contradicted object costs, bits"
     )
+    out_of_view_contradiction_bits: float = Field(
+        1.0,
+        ge=0,
+        le=1000,
+        description="with tolerances covariance: evidence a contradicted object out of the other keyframe's view "
+        "(contradiction_view_deg) costs, bits: the other pass may have seen it from a pose between its keyframes' or "
+        "missed it at the image's edge",
+    )
     min_evidence_bits: float = Field(
         6.0,
         ge=0,
@@ -158,8 +166,8 @@ class MatchingConfig(Section):
         ge=0,
         le=10_000,
         description="reject if under the fit more objects than this stand well inside the other keyframe's ground "
-        "with no object of their label near them there: a place driven again shows the same objects, a street that "
-        "only shares part of its layout shows others",
+        "and in its view (contradiction_view_deg) with no object of their label near them there: a place driven "
+        "again shows the same objects, a street that only shares part of its layout shows others",
     )
     contradiction_radius: float = Field(
         2.5,
@@ -174,6 +182,15 @@ class MatchingConfig(Section):
         le=1000,
         description="only objects this far inside the other keyframe's ground count, m: near its edge an object may "
         "fall in one keyframe and not in the other by the noise of its centre",
+    )
+    contradiction_view_deg: float = Field(
+        30.0,
+        gt=0,
+        le=180,
+        description="only contradicted objects within this angle of the heading of one of the robot poses the other "
+        "keyframe's objects were seen from count against max_contradictions, degrees (all cost contradiction_bits): "
+        "the camera's half field of view less a margin for objects cut off at the image's edge (KITTI's is 41°; "
+        "180: any direction)",
     )
     max_place_offset: float = Field(
         3.5,
@@ -209,6 +226,12 @@ class MatchingConfig(Section):
         le=1000,
         description="a retrieved keyframe is matched as a place: with the stored keyframes of its pass whose robot "
         "poses lie this close to its own, their objects merged (loop.places); 0: the keyframe alone",
+    )
+    recentre_places: bool = Field(
+        True,
+        description="when a place's fit fails on more than max_contradictions objects in view, match once more the "
+        "place around the member nearest to where the fit puts the robot (a place reaches place_radius either side "
+        "of its anchor: one anchored at the far end holds objects the query never had in view)",
     )
     query_radius: float = Field(
         10.0,

@@ -141,6 +141,7 @@ class LoopClosureDetector:
         side = match_side(query, self.config)  # the query's share of matching, once for all its candidates
         found: list[_Relocalisation] = []
         tried: set[int] = set()
+        anchors: set[int] = set()  # the places tried again around where a failed fit put the robot
         places = 0
         for candidate, shared in self._ordered_candidates(query, eligible):
             if places == self.config.candidates:
@@ -154,10 +155,28 @@ class LoopClosureDetector:
                 self.config.min_shared_triangles
             ):
                 continue  # not one of its triangles: it cannot hold the query's place
-            relocalisation = self._relocalisation(side, place, eligible, odometer_m)
+            relocalisation, match = self._relocalisation(side, place, eligible, odometer_m)
+            anchor = None if relocalisation is not None else self._recentred(match, place, candidate, query)
+            if anchor is not None and anchor not in anchors:
+                anchors.add(anchor)
+                place = self._place(anchor, odometer_m)
+                tried.update(place.members)
+                relocalisation, _ = self._relocalisation(side, place, eligible, odometer_m)
             if relocalisation is not None:
                 found.append(relocalisation)
         return found
+
+    def _recentred(self, match: KeyframeMatch | None, place: Place, anchor: int, query: Keyframe) -> int | None:
+        """The member of a place nearest to where a fit puts the robot, when the fit failed on objects in view that
+        the other side lacks (more than `max_contradictions`) and that member is not the place's anchor: the place
+        around it holds the objects the query sees rather than the far end of the old place. None otherwise, or
+        when `matching.recentre_places` is off."""
+        if not self.config.recentre_places or match is None or match.contradicted_in_view is None:
+            return None
+        if np.count_nonzero(match.contradicted_in_view) <= self.config.max_contradictions:
+            return None
+        nearest = self.index.nearest((match.transform @ query.pose)[:3, 3], np.asarray(place.members))
+        return None if nearest == anchor else nearest
 
     def _query_window(self, keyframe: Keyframe) -> Keyframe:
         """The keyframe with the keyframes queried just before it (ids one less each) whose robot poses lie within
@@ -178,34 +197,37 @@ class LoopClosureDetector:
 
     def _relocalisation(
         self, query: MatchSide, place: Place, eligible: np.ndarray, odometer_m: float
-    ) -> _Relocalisation | None:
+    ) -> tuple[_Relocalisation | None, KeyframeMatch | None]:
         """The query keyframe relocalised in one place, or None when the match fails verification or puts the robot
         too far from the place's keyframes, off its level, or turned more than the odometry can drift; `eligible`:
-        the ids (increasing) of the stored keyframes it may close a loop with."""
+        the ids (increasing) of the stored keyframes it may close a loop with. With it, the match (None: no
+        eligible member)."""
         keyframe = query.keyframe
         tested = self._tested(len(eligible))
         match = self._match(query, place.keyframe, tested)
         members = np.asarray(place.members, dtype=int)
         found = np.minimum(np.searchsorted(eligible, members), max(len(eligible) - 1, 0))
         members = members[eligible[found] == members] if len(eligible) else members[:0]
-        if not match.verified or not len(members):
-            return None
+        if not len(members):
+            return None, None
+        if not match.verified:
+            return None, match
         nearest = self.index.nearest((match.transform @ keyframe.pose)[:3, 3], members)
         evidence = match.evidence + self._drift_bits(keyframe, match.transform, nearest, odometer_m)
         needed = self.config.min_evidence_bits + np.log2(max(tested, 1))
         if self.config.tolerances == "covariance" and evidence < needed:
-            return None
+            return None, match
         match = replace(match, match=nearest, evidence=evidence)
         closure, offset = self._closure(keyframe, match)
         same_place = np.linalg.norm(offset[:2]) <= self.config.max_place_offset
         level = abs(offset[2]) <= self.config.max_vertical_offset
         if not (same_place and level and self._plausible_turn(match, odometer_m)):
-            return None
+            return None, match
         position = keyframe.pose[:3, 3].copy()
         return _Relocalisation(
             keyframe.id, position, match.transform, closure, match.evidence, place.members, match,
             (keyframe, place.keyframe),
-        )  # fmt: skip
+        ), match  # fmt: skip
 
     def _unambiguous(self, found: list[_Relocalisation]) -> _Relocalisation | None:
         """The relocalisation with the most evidence (or the best in the pass the previous keyframe relocalised in),

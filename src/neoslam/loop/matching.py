@@ -75,6 +75,7 @@ class KeyframeMatch:
     spent_bits: float = 0.0  # what fixing the fit spent of them
     contradicted: np.ndarray | None = None  # (m, 2) ground positions of the contradicted objects, stored world
     contradicted_labels: tuple[str, ...] = ()
+    contradicted_in_view: np.ndarray | None = None  # (m,) bool: in view of the other keyframe (verification)
 
     @property
     def n_matches(self) -> int:
@@ -265,17 +266,16 @@ def match_keyframes(
     if fit is None or len(pairs) < needed:
         return _unverified(query, stored, score, pairs)
     residual_rms = float(np.sqrt(np.mean(fit.distances**2)))
-    against, against_labels = contradicted_objects(query, stored, fit.transform, config)
-    contradicted = len(against_labels)
+    against, against_labels, in_view = contradicted_objects(query, stored, fit.transform, config)
     bits, spent = pair_evidence(query, stored, pairs, fit, label_shares, config)
-    evidence = evidence_from(bits, spent, contradicted, config)
+    evidence = evidence_from(bits, spent, len(against_labels), config, len(in_view) - np.count_nonzero(in_view))
     verified = bool(
         fit_consistent(fit, config)
-        and contradicted <= config.max_contradictions
+        and np.count_nonzero(in_view) <= config.max_contradictions
         and (config.tolerances == "fixed" or evidence >= config.min_evidence_bits + np.log2(max(tested, 1)))
     )
     verified_score = float(affinity[np.ix_(kept, kept)].sum() / e_max) if verified else 0.0
     return KeyframeMatch(
         query.id, stored.id, score, pairs, fit.transform, residual_rms, verified, verified_score, evidence, bits, spent,
-        against, against_labels,
+        against, against_labels, in_view,
     )  # fmt: skip

@@ -92,6 +92,7 @@ def merge_keyframes(keyframes: list[Keyframe], anchor: Keyframe, association_rad
         patches=patches[keep],
         provisional=np.array([not known[i] for i in kept], dtype=bool),
         covariances=covariances[keep],
+        views=np.concatenate([k.views for k in keyframes]),
     )
 
 

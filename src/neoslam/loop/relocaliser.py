@@ -19,8 +19,8 @@ consistency: one place for the robot, one heading) must show the whole map's thr
 - a keyframe's fit spent bits fixing its three parameters, at most log2(object_area / (π consistent_distance²)) of
   them, since it had to land within `consistent_distance` of the run's, which chance does once in that many: they
   are taken from what its new objects add (a keyframe adds nothing, never less);
-- every object a keyframe contradicts costs `matching.contradiction_bits`, once however many keyframes contradict
-  it.
+- every object a keyframe contradicts costs `matching.contradiction_bits` (`out_of_view_contradiction_bits` out of
+  the place's view), once however many keyframes contradict it.
 Runs are followed side by side (a keyframe may verify in several places), over at most
 `map_store.relocalisation_run_keyframes` keyframes, and go on past `map_store.relocalisation_run_gap` keyframes that
 relocalise nowhere (seeing too few objects shows nothing against a place); one that reaches the threshold at a
@@ -174,10 +174,12 @@ class MapRelocaliser(LoopClosureDetector):
                     matched.append((label, stored, queried))
                     new += pair_bits
             bits += max(new - min(step.match.spent_bits, self._later_spent_cap), 0.0)
-            for label, at in zip(step.match.contradicted_labels, step.match.contradicted, strict=True):
+            for label, at, seen in zip(
+                step.match.contradicted_labels, step.match.contradicted, step.match.contradicted_in_view, strict=True
+            ):
                 if not any(label == other and math.dist(at, there) <= radius for other, there in against):
                     against.append((label, at))
-                    bits -= self.config.contradiction_bits
+                    bits -= self.config.contradiction_bits if seen else self.config.out_of_view_contradiction_bits
         return bits
 
     def _plausible_turn(self, match: KeyframeMatch, odometer_m: float) -> bool:

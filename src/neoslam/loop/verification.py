@@ -16,7 +16,11 @@ d² = rᵀ C⁻¹ r is chi-square with 2 degrees of freedom for a right pair.
 - The fit is consistent when Σ d² over the inliers stays within the chi-square bound of `fit_probability` with
   2k - 3 degrees of freedom (k pairs, 3 parameters).
 - A contradiction is an object of either keyframe well inside the other's ground with no object of its label there
-  within `contradiction_radius`, or within the chi-square gate of the two centres' covariances.
+  within `contradiction_radius`, or within the chi-square gate of the two centres' covariances. It is in view when
+  it also stands within `contradiction_view_deg` of the heading of one of the robot poses the other's objects were
+  seen from: only those count against `max_contradictions`, since an object at the edge of the camera's view is
+  seen by one pass and missed by another that looked a few degrees away, and cost `contradiction_bits` (the others
+  `out_of_view_contradiction_bits`).
 - The match must carry enough evidence that the two keyframes show one place and not two streets that happen to
   align: in bits, the log-likelihood ratio of the inliers' residuals, Σ log2(N(r; 0, C) / ρ_label), where ρ_label is
   the density of objects of the pair's label (one per `object_area` m² of street, times the label's share among the
@@ -40,7 +44,7 @@ from scipy.stats import chi2
 
 from neoslam.config import MatchingConfig
 from neoslam.geometry import least_squares_yaw, transform_points
-from neoslam.types import Keyframe
+from neoslam.types import Keyframe, moved_views
 
 __all__ = [
     "FitResult",
@@ -51,6 +55,7 @@ __all__ = [
     "contradictions",
     "contradicted_objects",
     "has_counterpart",
+    "in_view",
     "chi2_bound",
     "pair_evidence",
     "evidence_bits",
@@ -244,6 +249,15 @@ def _ground(centres: np.ndarray, robot: np.ndarray) -> tuple[np.ndarray, float]:
     return current, float(np.linalg.norm(centres[:, :2] - current, axis=1).max())
 
 
+def in_view(points: np.ndarray, views: np.ndarray, half_angle_deg: float) -> np.ndarray:
+    """Bool per ground point (n, 2): within `half_angle_deg` of the heading of one of the views (m, 3) of x, y,
+    yaw, seen from its position."""
+    offset = points[:, None, :] - views[None, :, :2]
+    bearing = np.arctan2(offset[..., 1], offset[..., 0]) - views[None, :, 2]
+    off_axis = np.abs((bearing + np.pi) % (2.0 * np.pi) - np.pi)
+    return (off_axis <= np.radians(half_angle_deg)).any(axis=1)
+
+
 def has_counterpart(
     points: np.ndarray,
     labels,
@@ -280,25 +294,30 @@ def contradictions(query: Keyframe, stored: Keyframe, transform: np.ndarray, con
 
 def contradicted_objects(
     query: Keyframe, stored: Keyframe, transform: np.ndarray, config: MatchingConfig
-) -> tuple[np.ndarray, tuple[str, ...]]:
-    """The contradicted objects (contradictions): their ground positions (m, 2) in the stored world, and labels."""
+) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
+    """The contradicted objects (contradictions): their ground positions (m, 2) in the stored world, labels, and
+    whether each stands in view of the other keyframe (in_view with `contradiction_view_deg` of one of the robot
+    poses its objects were seen from)."""
     moved = transform_points(transform, query.centers)
     moved_cov = _turned(query.covariances, transform)
     query_centre, query_radius = _ground(moved, (transform @ query.pose)[:3, 3])
     stored_centre, stored_radius = _ground(stored.centers, stored.pose[:3, 3])
-    positions, names = [], []
-    for points, labels, cov, known, others, other_labels, other_cov, centre, radius in (
+    query_views = moved_views(query.views, transform)
+    positions, names, seen = [], [], []
+    for points, labels, cov, known, others, other_labels, other_cov, centre, radius, views in (
         (moved, query.labels, moved_cov, ~query.provisional, stored.centers, stored.labels, stored.covariances,
-         stored_centre, stored_radius),
+         stored_centre, stored_radius, stored.views),
         (stored.centers, stored.labels, stored.covariances, ~stored.provisional, moved, query.labels, moved_cov,
-         query_centre, query_radius),
+         query_centre, query_radius, query_views),
     ):  # fmt: skip
         inside = known & (np.linalg.norm(points[:, :2] - centre, axis=1) <= radius - config.contradiction_margin)
         labels_inside = np.asarray(labels)[inside]
         found = has_counterpart(points[inside], labels_inside, cov[inside], others, other_labels, other_cov, config)
-        positions.append(points[inside][~found, :2])
+        missed = points[inside][~found, :2]
+        positions.append(missed)
         names.extend(labels_inside[~found].tolist())
-    return np.concatenate(positions), tuple(names)
+        seen.append(in_view(missed, views, config.contradiction_view_deg))
+    return np.concatenate(positions), tuple(names), np.concatenate(seen)
 
 
 def pair_evidence(
@@ -341,7 +360,12 @@ def evidence_bits(
     return evidence_from(bits, spent, contradicted, config)
 
 
-def evidence_from(bits: np.ndarray, spent: float, contradicted: int, config: MatchingConfig) -> float:
+def evidence_from(
+    bits: np.ndarray, spent: float, contradicted: int, config: MatchingConfig, out_of_view: int = 0
+) -> float:
     """A match's evidence from its pairs' bits and what fixing the fit spent (pair_evidence), less
-    `contradiction_bits` for each contradicted object."""
-    return float(bits.sum() - spent - config.contradiction_bits * contradicted)
+    `contradiction_bits` for each contradicted object in view of the other keyframe and
+    `out_of_view_contradiction_bits` for each of the `out_of_view` others among the `contradicted`."""
+    in_view = contradicted - out_of_view
+    cost = config.contradiction_bits * in_view + config.out_of_view_contradiction_bits * out_of_view
+    return float(bits.sum() - spent - cost)
