@@ -22,7 +22,7 @@ from neoslam.evaluation.loops import LoopCriteria, evaluate_closures
 from neoslam.geometry import invert_pose, make_pose, planar_motion, rotation_angle, transform_points
 from neoslam.loop.detector import LoopClosureDetector
 from neoslam.loop.keyframes import KeyframeBuilder
-from neoslam.loop.matching import match_keyframes
+from neoslam.loop.matching import KeyframeMatch, match_keyframes
 from neoslam.loop.relocaliser import MapRelocaliser
 from neoslam.pipeline import run
 from neoslam.sim.routes import ROUTES
@@ -419,3 +419,27 @@ def test_a_stored_place_leaves_out_its_members_from_the_last_metres(make_keyfram
     assert detector._place(0, travelled + 2.0).members == (0, 1)
     relocaliser = MapRelocaliser(KEYFRAMES, MATCHING, MapStoreConfig(), stored)
     assert relocaliser._place(0, 0.0).members == (0, 1)
+
+
+def test_a_place_that_fails_on_objects_in_view_is_matched_again_around_the_fits_robot(passes: TwoPasses) -> None:
+    # The place of the keyframe stored at x = 40 reaches 20 m either side; a fit that puts the revisit's robot at
+    # x = 52.5 and finds five objects in view missing is tried again around the keyframe stored at x = 50.
+    detector = LoopClosureDetector(KEYFRAMES, MATCHING)
+    passes.first_pass(detector)
+    place = detector.place(_stored_at(40.0), SECOND_PASS_ODOMETER)
+    assert _stored_at(50.0) in place.members
+    query = passes.keyframe(passes.second_pass_pose(52.0), np.eye(4), frame=2000)
+    failed = KeyframeMatch(
+        query.id, _stored_at(40.0), 5.0, np.zeros((0, 2), int), np.eye(4), 0.1, False, 0.0,
+        contradicted_in_view=np.ones(MATCHING.max_contradictions + 1, dtype=bool),
+    )  # fmt: skip
+    assert detector._recentred(failed, place, _stored_at(40.0), query) == _stored_at(50.0)
+    assert detector._recentred(failed, place, _stored_at(50.0), query) is None  # already centred there
+    few = replace(failed, contradicted_in_view=np.ones(MATCHING.max_contradictions, dtype=bool))
+    assert detector._recentred(few, place, _stored_at(40.0), query) is None  # failed for another reason
+    out_of_view = replace(failed, contradicted_in_view=~failed.contradicted_in_view)
+    assert detector._recentred(out_of_view, place, _stored_at(40.0), query) is None
+    off = LoopClosureDetector(KEYFRAMES, MATCHING.model_copy(update={"recentre_places": False}))
+    for keyframe in detector.index.keyframes:
+        off.add(keyframe, detector.index.odometer(keyframe.id))
+    assert off._recentred(failed, off.place(_stored_at(40.0), SECOND_PASS_ODOMETER), _stored_at(40.0), query) is None

@@ -188,9 +188,9 @@ class MatchingConfig(Section):
         gt=0,
         le=180,
         description="only contradicted objects within this angle of the heading of one of the robot poses the other "
-        "keyframe's objects were seen from count against max_contradictions, degrees (all cost contradiction_bits): "
-        "the camera's half field of view less a margin for objects cut off at the image's edge (KITTI's is 41°; "
-        "180: any direction)",
+        "keyframe's objects were seen from count against max_contradictions and cost contradiction_bits, degrees "
+        "(the others cost out_of_view_contradiction_bits): the camera's half field of view less a margin for objects "
+        "cut off at the image's edge (KITTI's is 41°; 180: any direction)",
     )
     max_place_offset: float = Field(
         3.5,
