@@ -13,6 +13,7 @@ from typing import Literal
 
 import numpy as np
 
+from neoslam.geometry import yaw_of
 from neoslam.record_checks import check_frame, check_observation
 
 __all__ = [
@@ -120,13 +121,12 @@ class Keyframe:
 
 def moved_views(views: np.ndarray, transform: np.ndarray) -> np.ndarray:
     """Views (m, 3) of x, y, yaw moved to another frame by `transform` (4, 4), turned by its yaw."""
-    turn = transform[:2, :2]
-    return np.column_stack([views[:, :2] @ turn.T + transform[:2, 3], views[:, 2] + np.arctan2(turn[1, 0], turn[0, 0])])
+    return np.column_stack([views[:, :2] @ transform[:2, :2].T + transform[:2, 3], views[:, 2] + yaw_of(transform)])
 
 
 def _ground_pose(pose: np.ndarray) -> np.ndarray:
     """(x, y, yaw) of a pose T_world_robot: the robot's x axis is its heading."""
-    return np.array([pose[0, 3], pose[1, 3], np.arctan2(pose[1, 0], pose[0, 0])])
+    return np.array([pose[0, 3], pose[1, 3], yaw_of(pose)])
 
 
 @dataclass(slots=True)
