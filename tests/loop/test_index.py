@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from neoslam.config import MatchingConfig
 from neoslam.geometry import make_pose, transform_points
-from neoslam.loop.index import INITIAL_CAPACITY, KeyframeIndex, signature
+from neoslam.loop.index import INITIAL_CAPACITY, RANK_CHUNK, KeyframeIndex, _best_first, signature
 
 CONFIG = MatchingConfig()
 LABELS = ["car", "truck", "bicycle", "person"]
@@ -140,3 +142,19 @@ def test_candidates_are_the_keyframes_sharing_most_triangles_first(make_keyframe
     np.testing.assert_array_equal(ranked[:3], np.argsort(replaced_counts)[:3])
     assert shared[ranked[0]] > shared[ranked[-1]]
     assert index.nbytes > 0
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    scores=st.lists(st.integers(0, 6), min_size=0, max_size=3 * RANK_CHUNK + 5),
+    taken=st.integers(0, 3 * RANK_CHUNK + 5),
+)
+def test_best_first_is_a_stable_sort_however_far_it_is_read(scores: list[int], taken: int) -> None:
+    """Sorting a chunk at a time gives the stable sort's order, ties (many here: few distinct scores) included,
+    whether the iteration stops early or runs to the end."""
+    ids = np.arange(100, 100 + len(scores))
+    values = np.asarray(scores, dtype=float) / 3.0
+    expected = ids[np.argsort(-values, kind="stable")].tolist()
+    got = _best_first(ids, values)
+    assert [next(got) for _ in range(min(taken, len(ids)))] == expected[:taken]
+    assert list(_best_first(ids, values)) == expected

@@ -114,12 +114,12 @@ class LoopClosureDetector:
         if previous is not None and previous.keyframe_id == keyframe.id - 1:
             near = previous.closure.match_keyframe + np.arange(-PASS_NEIGHBOURS, PASS_NEIGHBOURS + 1)
             preferred = [int(c) for c in near[np.isin(near, eligible)]]
-        ranked, shared = self.index.ranked(keyframe, eligible)
+        ranked, shared = self.index.best_first(keyframe, eligible)
         for candidate in preferred:
             yield candidate, None
         for candidate in ranked:
-            if int(candidate) not in preferred:
-                yield int(candidate), shared
+            if candidate not in preferred:
+                yield candidate, shared
 
     def relocalise(self, keyframe: Keyframe, odometer_m: float) -> _Relocalisation | None:
         """The verified place match with the most evidence among the retrieval candidates (each tried once as a
@@ -204,7 +204,7 @@ class LoopClosureDetector:
         eligible member)."""
         keyframe = query.keyframe
         tested = self._tested(len(eligible))
-        match = self._match(query, place.keyframe, tested)
+        match = self._match(query, place.side(self.config), tested)
         members = np.asarray(place.members, dtype=int)
         found = np.minimum(np.searchsorted(eligible, members), max(len(eligible) - 1, 0))
         members = members[eligible[found] == members] if len(eligible) else members[:0]

@@ -14,6 +14,7 @@ recognises as a stored one is not stored again (lifelong mapping), so the stored
 from __future__ import annotations
 
 from collections.abc import Iterator
+from itertools import islice
 
 import numpy as np
 
@@ -26,6 +27,23 @@ __all__ = ["KeyframeIndex", "StoredKeyframes", "signature"]
 LABEL_BINS = 8  # labels hashed into this many bins (YOLO's classes in use are far fewer)
 DISTANCE_BINS = np.linspace(0.0, 40.0, 21)  # m, pairwise object distances
 INITIAL_CAPACITY = 256
+RANK_CHUNK = 64  # eligible keyframes sorted at a time (best_first): a query tries a few places of a few keyframes
+
+
+def _best_first(ids: np.ndarray, scores: np.ndarray) -> Iterator[int]:
+    """The ids by decreasing score, ties in the order given (a stable sort of all of them), sorting only the best
+    RANK_CHUNK (with any tied with the last of them) still left each time more are asked for."""
+    remaining = np.arange(len(ids))
+    while len(remaining):
+        left = scores[remaining]
+        if len(remaining) > RANK_CHUNK:
+            threshold = -np.partition(-left, RANK_CHUNK - 1)[RANK_CHUNK - 1]
+            best = left >= threshold  # every id scoring at least the chunk's last: the stable sort's next ones
+        else:
+            best = np.ones(len(remaining), dtype=bool)
+        chosen = remaining[best]
+        yield from ids[chosen[np.argsort(-scores[chosen], kind="stable")]].tolist()
+        remaining = remaining[~best]
 
 
 def _label_bin(label: str) -> int:
@@ -129,28 +147,41 @@ class KeyframeIndex:
         n = len(self.keyframes)
         travelled = odometer_m - self._odometer[:n]
         radius = self.config.search_radius + self.config.search_radius_per_metre * travelled
-        near = np.linalg.norm(self._positions[:n] - position[:2], axis=1) <= radius
+        dx, dy = self._positions[:n, 0] - position[0], self._positions[:n, 1] - position[1]
+        near = dx * dx + dy * dy <= radius * radius  # squared: no root over every stored keyframe
         return self._ids[:n][near & (travelled >= self.config.exclude_recent_distance)]
 
     def recent(self, keyframe_id: int, odometer_m: float) -> bool:
         """Whether a stored keyframe was made within the last `exclude_recent_distance` metres of travel."""
         return odometer_m - self.odometer(keyframe_id) < self.config.exclude_recent_distance
 
-    def ranked(self, query: Keyframe, eligible: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """The eligible ids (increasing), most alike to the query first: by shared triangles (`retrieval:
-        triangles`, loop.triangles), or by signature; and with triangles, the number of triangle keys every stored
-        keyframe (by slot) shares with the query."""
+    def _scores(self, query: Keyframe, eligible: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """How alike each eligible keyframe is to the query: by shared triangles (`retrieval: triangles`,
+        loop.triangles), or by signature; and with triangles, the number of triangle keys every stored keyframe
+        (by slot) shares with the query."""
         slots = self._slots_of(eligible)
         if self.config.retrieval == "triangles":
             scores, shared = self._triangles.scores(query)
-            return eligible[np.argsort(-scores[slots], kind="stable")], shared
-        similarity = self._signatures[slots] @ signature(query)
-        return eligible[np.argsort(-similarity, kind="stable")], None
+            return scores[slots], shared
+        return self._signatures[slots] @ signature(query), None
+
+    def ranked(self, query: Keyframe, eligible: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The eligible ids (increasing), most alike to the query first, ties in the order given; and with
+        triangles, the number of triangle keys every stored keyframe (by slot) shares with the query."""
+        scores, shared = self._scores(query, eligible)
+        return eligible[np.argsort(-scores, kind="stable")], shared
+
+    def best_first(self, query: Keyframe, eligible: np.ndarray) -> tuple[Iterator[int], np.ndarray | None]:
+        """ranked, the ids sorted a few at a time as they are read: a query tries a few places, and sorting every
+        eligible keyframe of a large map costs more than matching them."""
+        scores, shared = self._scores(query, eligible)
+        return _best_first(eligible, scores), shared
 
     def candidates(self, query: Keyframe, odometer_m: float) -> np.ndarray:
         """Ids of the best `candidates` eligible keyframes, best first."""
         eligible = self.eligible(query.pose[:3, 3], odometer_m)
-        return self.ranked(query, eligible)[0][: self.config.candidates]
+        ids, _ = self.best_first(query, eligible)
+        return np.fromiter(islice(ids, self.config.candidates), dtype=eligible.dtype)
 
     @property
     def nbytes(self) -> int:

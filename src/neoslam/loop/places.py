@@ -15,11 +15,13 @@ the query window, loop.detector).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from neoslam.config import MatchingConfig
 from neoslam.loop.index import StoredKeyframes
+from neoslam.loop.matching import MatchSide, match_side
 from neoslam.types import Keyframe
 
 __all__ = ["Place", "merge_keyframes", "PlaceCache"]
@@ -31,6 +33,14 @@ class Place:
 
     keyframe: Keyframe
     members: tuple[int, ...]
+    _side: list[MatchSide] = field(default_factory=list, compare=False, repr=False)
+
+    def side(self, config: MatchingConfig) -> MatchSide:
+        """The merged keyframe's share of matching (loop.matching.match_side), worked out when first asked for: a
+        cached place is matched by many queries, always with its detector's config."""
+        if not self._side:
+            self._side.append(match_side(self.keyframe, config))
+        return self._side[0]
 
 
 def _kept_objects(

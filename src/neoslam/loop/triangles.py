@@ -13,6 +13,7 @@ vectorised searches whatever the map's size.
 
 from __future__ import annotations
 
+from functools import lru_cache
 from itertools import combinations
 
 import numpy as np
@@ -27,6 +28,7 @@ SIDE_BITS = TRIANGLE_SIDE_BITS  # up to 255 bins a side (matching.triangle_max_s
 MERGE_SHARE = 0.25  # the tail is merged into the main keys once it holds this share of them
 MIN_TAIL = 4096  # or, while the index is small, this many keys
 MAX_TAIL = 32768  # and at most this many: an add copies the tail (a merge costs a sort of all keys, < 1 ms per add)
+_NEIGHBOUR_CHOICES = ((np.arange(8)[:, None] >> np.arange(3)) & 1).astype(bool)  # (8, 3): which sides move a bin
 
 
 def _pack(labels: np.ndarray, bins: np.ndarray) -> np.ndarray:
@@ -39,6 +41,12 @@ def _pack(labels: np.ndarray, bins: np.ndarray) -> np.ndarray:
     return key
 
 
+@lru_cache(maxsize=64)
+def _triples(n: int) -> np.ndarray:
+    """(C(n, 3), 3) every three of n indices, in the order of itertools.combinations."""
+    return np.array(list(combinations(range(n), 3)), dtype=np.int64).reshape(-1, 3)
+
+
 def _triangles(
     keyframe: Keyframe, codes: np.ndarray, max_objects: int, max_side: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -49,7 +57,7 @@ def _triangles(
         return np.zeros((0, 3), dtype=np.int64), np.zeros((0, 3))
     current = np.argmin(np.linalg.norm(centres - keyframe.pose[:2, 3], axis=1))
     nearest = np.argsort(np.linalg.norm(centres - centres[current], axis=1), kind="stable")[:max_objects]
-    triples = np.array(list(combinations(nearest, 3)))
+    triples = nearest[_triples(len(nearest))]
     points = centres[triples]  # (t, 3, 2)
     sides = np.linalg.norm(points[:, [1, 2, 0]] - points[:, [2, 0, 1]], axis=2)  # side opposite each vertex
     order = np.argsort(sides, axis=1, kind="stable")
@@ -70,13 +78,11 @@ def triangle_keys(
     if not spread:  # matching.triangle_max_side keeps every side within SIDE_BITS
         return np.unique(_pack(labels, bins))
     neighbour = np.where(scaled - bins >= 0.5, bins + 1, bins - 1)
-    keys = []
-    for choice in range(8):  # each side in its own bin or its nearer neighbour
-        pick = [(choice >> column) & 1 for column in range(3)]
-        chosen = np.column_stack([neighbour[:, c] if pick[c] else bins[:, c] for c in range(3)])
-        valid = (chosen >= 0).all(axis=1) & (chosen < 2**SIDE_BITS).all(axis=1)
-        keys.append(_pack(labels[valid], chosen[valid]))
-    return np.unique(np.concatenate(keys)) if keys else np.zeros(0, dtype=np.int64)
+    # each side in its own bin or its nearer neighbour: the 8 choices at once, (8, t, 3)
+    chosen = np.where(_NEIGHBOUR_CHOICES[:, None, :], neighbour[None], bins[None]).reshape(-1, 3)
+    labels = np.broadcast_to(labels[None], (8, *labels.shape)).reshape(-1, 3)
+    valid = (chosen >= 0).all(axis=1) & (chosen < 2**SIDE_BITS).all(axis=1)
+    return np.unique(_pack(labels[valid], chosen[valid]))
 
 
 def _runs(sorted_keys: np.ndarray, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
