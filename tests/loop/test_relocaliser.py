@@ -119,7 +119,7 @@ def test_a_run_counts_each_object_once(stored_map, make_keyframe, make_yaw_pose)
         relocaliser._queried.clear()  # each one alone, not joined by the query window
         steps.append(max(relocaliser._verified(again, 0.0), key=lambda step: step.evidence))
     single = steps[0].evidence
-    assert single > 0 and relocaliser._run_bits(tuple(steps)) == pytest.approx(single)
+    assert single > 0 and relocaliser.runs.bits(tuple(steps)) == pytest.approx(single)
 
 
 def test_a_fresh_relocaliser_waits_for_consecutive_keyframes(stored_map, make_keyframe) -> None:

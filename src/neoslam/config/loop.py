@@ -313,6 +313,26 @@ class MatchingConfig(Section):
         2.0, gt=0, le=1000, description="consecutive relocalisations put the robot within this of each other, m"
     )
     consistent_yaw_deg: float = Field(5.0, gt=0, le=180, description="and within this yaw, degrees")
+    evidence: Literal["keyframe", "run"] = Field(
+        "keyframe",
+        description="what a closure must show, min_evidence_bits plus log2 of the stored keyframes the query could "
+        "have matched: keyframe, each of the consecutive keyframes alone; run, the consecutive keyframes that "
+        "relocalise consistently together, each matched object counted once (a keyframe alone then needs "
+        "min_evidence_bits; loop.runs)",
+    )
+    run_keyframes: int = Field(
+        8,
+        gt=0,
+        le=1000,
+        description="with evidence run: the evidence of at most this many consecutive keyframes is counted together",
+    )
+    run_gap: int = Field(
+        1,
+        ge=0,
+        le=10,
+        description="with evidence run: a run goes on past this many keyframes that relocalise nowhere (too few "
+        "objects seen, or a view hidden by traffic): they show nothing against the place",
+    )
 
     @model_validator(mode="after")
     def _triangle_sides_fit_their_bits(self) -> MatchingConfig:

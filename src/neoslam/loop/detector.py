@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Iterator
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
@@ -20,24 +20,13 @@ from neoslam.geometry import invert_pose, rotation_angle, transform_points
 from neoslam.loop.index import KeyframeIndex
 from neoslam.loop.matching import KeyframeMatch, MatchSide, match_keyframes, match_side
 from neoslam.loop.places import Place, PlaceCache, merge_keyframes
+from neoslam.loop.runs import EvidenceRuns, Relocalisation, Run
 from neoslam.types import Keyframe, LoopClosure
 
 __all__ = ["LoopClosureDetector"]
 
 PASS_NEIGHBOURS = 3  # stored keyframes this close in id to a match belong to the same pass of a place
 QUERY_HISTORY = 16  # keyframes kept for the query window (matching.query_radius: a few keyframe spacings)
-
-
-@dataclass(frozen=True)
-class _Relocalisation:
-    keyframe_id: int
-    position: np.ndarray  # (3,) of the query keyframe's robot, query world
-    transform: np.ndarray  # query world -> stored world
-    closure: LoopClosure
-    evidence: float = 0.0  # bits (loop.verification.evidence_bits)
-    members: tuple[int, ...] = ()  # the stored keyframes of the place matched
-    match: KeyframeMatch | None = None  # the verified match: its pairs, their bits, the objects it contradicts
-    sides: tuple[Keyframe, Keyframe] | None = None  # the query (window) and the place its pairs index
 
 
 class _JoinedPlaces:
@@ -71,9 +60,14 @@ class LoopClosureDetector:
         self.index = KeyframeIndex(matching)
         self.places = PlaceCache(matching.place_radius, keyframes.association_radius)
         self.joined = _JoinedPlaces()
-        self._recent: deque[_Relocalisation | None] = deque(maxlen=max(matching.consecutive - 1, 0))
+        self._recent: deque[Relocalisation | None] = deque(maxlen=max(matching.consecutive - 1, 0))
         self._queried: deque[Keyframe] = deque(maxlen=QUERY_HISTORY)  # the last keyframes queried
         self._emitted: set[int] = set()
+        self._eligible = 0  # the stored keyframes the last query could have matched
+        self.accumulate = matching.evidence == "run"
+        self.runs = EvidenceRuns(
+            matching, keyframes.association_radius, matching.run_keyframes, matching.run_gap, self._consistent
+        )
 
     def _match(self, query: Keyframe | MatchSide, stored: Keyframe | MatchSide, tested: int = 1) -> KeyframeMatch:
         return match_keyframes(query, stored, self.config, self.e_max, self.index.label_shares(), tested)
@@ -121,7 +115,7 @@ class LoopClosureDetector:
             if candidate not in preferred:
                 yield candidate, shared
 
-    def relocalise(self, keyframe: Keyframe, odometer_m: float) -> _Relocalisation | None:
+    def relocalise(self, keyframe: Keyframe, odometer_m: float) -> Relocalisation | None:
         """The verified place match with the most evidence among the retrieval candidates (each tried once as a
         place), pinned to the member nearest to where the fit puts the robot; None when none verifies, or when
         another place, not joined to it, verifies with nearly as much evidence."""
@@ -129,17 +123,19 @@ class LoopClosureDetector:
 
     def _tested(self, eligible: int) -> int:
         """The number of places a keyframe's evidence is weighed against (log2 of it is added to the bits needed):
-        every eligible stored keyframe."""
-        return eligible
+        every eligible stored keyframe; with runs (`matching.evidence: run`), 1: the eligible keyframes' share is
+        asked of the run."""
+        return 1 if self.accumulate else eligible
 
-    def _verified(self, keyframe: Keyframe, odometer_m: float) -> list[_Relocalisation]:
+    def _verified(self, keyframe: Keyframe, odometer_m: float) -> list[Relocalisation]:
         """Every retrieval candidate's place (each tried once) in which the keyframe relocalises."""
         eligible = self.index.eligible(keyframe.pose[:3, 3], odometer_m)
+        self._eligible = len(eligible)
         query = self._query_window(keyframe)
         if not self._queried or self._queried[-1].id != keyframe.id:
             self._queried.append(keyframe)
         side = match_side(query, self.config)  # the query's share of matching, once for all its candidates
-        found: list[_Relocalisation] = []
+        found: list[Relocalisation] = []
         tried: set[int] = set()
         anchors: set[int] = set()  # the places tried again around where a failed fit put the robot
         places = 0
@@ -197,7 +193,7 @@ class LoopClosureDetector:
 
     def _relocalisation(
         self, query: MatchSide, place: Place, eligible: np.ndarray, odometer_m: float
-    ) -> tuple[_Relocalisation | None, KeyframeMatch | None]:
+    ) -> tuple[Relocalisation | None, KeyframeMatch | None]:
         """The query keyframe relocalised in one place, or None when the match fails verification or puts the robot
         too far from the place's keyframes, off its level, or turned more than the odometry can drift; `eligible`:
         the ids (increasing) of the stored keyframes it may close a loop with. With it, the match (None: no
@@ -224,12 +220,12 @@ class LoopClosureDetector:
         if not (same_place and level and self._plausible_turn(match, odometer_m)):
             return None, match
         position = keyframe.pose[:3, 3].copy()
-        return _Relocalisation(
+        return Relocalisation(
             keyframe.id, position, match.transform, closure, match.evidence, place.members, match,
             (keyframe, place.keyframe),
         ), match  # fmt: skip
 
-    def _unambiguous(self, found: list[_Relocalisation]) -> _Relocalisation | None:
+    def _unambiguous(self, found: list[Relocalisation]) -> Relocalisation | None:
         """The relocalisation with the most evidence (or the best in the pass the previous keyframe relocalised in),
         unless one that puts the robot elsewhere, in a place not joined to it, comes within `ambiguity_bits` of
         it."""
@@ -269,7 +265,7 @@ class LoopClosureDetector:
         bound = self.config.max_yaw_drift_deg + self.config.yaw_drift_per_100m * travelled / 100.0
         return bool(np.degrees(rotation_angle(match.transform[:3, :3])) <= bound)
 
-    def _consistent(self, a: _Relocalisation, b: _Relocalisation) -> bool:
+    def _consistent(self, a: Relocalisation, b: Relocalisation) -> bool:
         """Whether two relocalisations put the robot at the same place: compared where the two keyframes were made,
         not at the world origin. The fits' yaw is only known to a few tenths of a degree, and after a few km of
         travel the world origin is that many km away: at the origin, a 0.3° difference alone moves the transform
@@ -300,6 +296,8 @@ class LoopClosureDetector:
 
     def query(self, keyframe: Keyframe, odometer_m: float) -> list[LoopClosure]:
         """Closures accepted with this keyframe: its own, and those of the preceding keyframes it confirms."""
+        if self.accumulate:
+            return self._query_runs(keyframe, odometer_m)
         current = self.relocalise(keyframe, odometer_m)
         history = list(self._recent)
         self._recent.append(current)
@@ -316,6 +314,26 @@ class LoopClosureDetector:
         self._emitted = {k for k in self._emitted if k > keyframe.id - len(history) - 1}
         self._emitted.update(c.query_keyframe for c in accepted)
         return accepted
+
+    def _query_runs(self, keyframe: Keyframe, odometer_m: float) -> list[LoopClosure]:
+        """query with evidence that accumulates (loop.runs): the closures of the last `consecutive` keyframes of
+        the run that reaches the eligible keyframes' threshold at this keyframe."""
+        best = self.runs.extend(self._verified(keyframe, odometer_m), keyframe.id)
+        self._recent.append(None if best is None else best.steps[-1])  # its place is tried first by the next one
+        needed = self.config.min_evidence_bits + np.log2(max(self._eligible, 1))
+        if best is None or not self.runs.accepted(best, needed, self.config.consecutive, self._joined):
+            return []
+        # the closures of the last `consecutive` keyframes, the ones a pipeline still holds the poses of
+        steps = [step for step in best.steps if step.keyframe_id > keyframe.id - self.config.consecutive]
+        for step in steps:
+            self.joined.join(step.closure.query_keyframe, step.closure.match_keyframe)
+        accepted = [step.closure for step in steps if step.keyframe_id not in self._emitted]
+        self._emitted = {k for k in self._emitted if k > keyframe.id - self.config.consecutive}
+        self._emitted.update(c.query_keyframe for c in accepted)
+        return accepted
+
+    def _joined(self, a: Run, b: Run) -> bool:
+        return self.joined.same(a.steps[-1].members, b.steps[-1].members)
 
     def add(self, keyframe: Keyframe, odometer_m: float) -> None:
         self.index.add(keyframe, odometer_m)
