@@ -109,9 +109,10 @@ def passes(make_street, make_keyframe, make_yaw_pose) -> TwoPasses:
     return TwoPasses(make_street, make_keyframe, make_yaw_pose)
 
 
+@pytest.mark.parametrize("evidence", ["keyframe", "run"])
 @pytest.mark.parametrize("yaw", [0.0, np.pi], ids=["same-direction", "opposite-direction"])
-def test_a_revisit_is_accepted_once_two_keyframes_agree(passes: TwoPasses, yaw: float) -> None:
-    detector = LoopClosureDetector(KEYFRAMES, MATCHING)
+def test_a_revisit_is_accepted_once_two_keyframes_agree(passes: TwoPasses, yaw: float, evidence: str) -> None:
+    detector = LoopClosureDetector(KEYFRAMES, MATCHING.model_copy(update={"evidence": evidence}))
     stored_poses = passes.first_pass(detector)
     xs = np.arange(20.0, 81.0, 5.0)
     accepted, truths = _second_pass(passes, detector, xs, yaw=yaw)
@@ -167,10 +168,13 @@ def test_consistency_is_judged_at_the_place_not_at_the_world_origin(passes: TwoP
     assert all(c.match_keyframe == _stored_at(x) for c, x in zip(sum(accepted, []), xs, strict=True))
 
 
-def test_an_isolated_relocalisation_is_not_accepted(passes: TwoPasses, make_street) -> None:
+@pytest.mark.parametrize(("evidence", "run_gap"), [("keyframe", 0), ("run", 0)])
+def test_an_isolated_relocalisation_is_not_accepted(passes: TwoPasses, make_street, evidence, run_gap) -> None:
     # Every other keyframe shows another street at the same place, which no drive gives: each keyframe alone, not
-    # merged with the one before (query_radius 0), the window being what a real drive keeps consistent.
-    detector = LoopClosureDetector(KEYFRAMES, MATCHING.model_copy(update={"query_radius": 0.0}))
+    # merged with the one before (query_radius 0), the window being what a real drive keeps consistent. (A run
+    # allowed a gap goes on past the other street's keyframes: test_a_run_goes_on_past_a_keyframe_that_sees_nothing.)
+    update = {"query_radius": 0.0, "evidence": evidence, "run_gap": run_gap}
+    detector = LoopClosureDetector(KEYFRAMES, MATCHING.model_copy(update=update))
     passes.first_pass(detector)
     elsewhere = make_street(np.random.default_rng(99), count=60, length=140.0)  # other objects, other looks
     xs = np.arange(20.0, 81.0, 5.0)
@@ -186,19 +190,47 @@ def test_an_isolated_relocalisation_is_not_accepted(passes: TwoPasses, make_stre
     assert accepted == []
 
 
-def test_relocalisations_of_keyframes_that_are_not_consecutive_are_not_accepted(passes: TwoPasses) -> None:
-    detector = LoopClosureDetector(KEYFRAMES, MATCHING)
+@pytest.mark.parametrize("evidence", ["keyframe", "run"])
+def test_relocalisations_of_keyframes_that_are_not_consecutive_are_not_accepted(passes: TwoPasses, evidence) -> None:
+    # a keyframe the detector never heard of between each two: a run with no gap ends there (a run allowed a gap of
+    # one goes on: test_a_run_goes_on_past_a_keyframe_that_sees_nothing)
+    detector = LoopClosureDetector(KEYFRAMES, MATCHING.model_copy(update={"evidence": evidence, "run_gap": 0}))
     passes.first_pass(detector)
     accepted, _ = _second_pass(passes, detector, [30.0, 35.0, 40.0], skip={1, 2})
     assert accepted == [[], [], []]
+
+
+def test_a_run_goes_on_past_a_keyframe_that_sees_nothing(passes: TwoPasses) -> None:
+    """With evidence run and a gap of one keyframe, two relocalisations one keyframe apart that agree close the
+    loop (the keyframe between them saw too few objects, or traffic hid them); with no gap, they do not."""
+    for run_gap, closed in ((1, 1), (0, 0)):
+        config = MATCHING.model_copy(update={"evidence": "run", "run_gap": run_gap, "query_radius": 0.0})
+        detector = LoopClosureDetector(KEYFRAMES, config)
+        passes.first_pass(detector)
+        drift = passes.yaw_pose(DRIFT_YAW, DRIFT)
+        accepted = []
+        for j, x in enumerate((30.0, 35.0, 40.0)):
+            keyframe = passes.keyframe(passes.second_pass_pose(x), drift, 1000 + j)
+            if j == 1:  # it saw nothing of the street
+                seen = slice(0, 2)
+                keyframe = replace(
+                    keyframe, centers=keyframe.centers[seen], labels=keyframe.labels[seen],
+                    patches=keyframe.patches[seen], provisional=None, covariances=None, views=None,
+                )  # fmt: skip
+            accepted += detector.query(keyframe, SECOND_PASS_ODOMETER + 5.0 * j)
+            detector.add(keyframe, SECOND_PASS_ODOMETER + 5.0 * j)
+        assert len(accepted) == closed
+        assert all(c.match_keyframe == _stored_at(40.0) for c in accepted)
 
 
 @pytest.mark.parametrize(("consistent_distance", "accepted"), [(MATCHING.consistent_distance, 0), (4.0, 9)])
 def test_consecutive_relocalisations_must_agree(passes: TwoPasses, consistent_distance: float, accepted: int) -> None:
     # Every other keyframe fits 3 m further along the street: each relocalises at the right place, but no two
     # consecutive ones agree on the transform (what a repeated pattern does). Each keyframe alone (query_radius 0):
-    # two keyframes 3 m apart in the odometry's frame of one pass are no drive's.
-    config = MATCHING.model_copy(update={"consistent_distance": consistent_distance, "query_radius": 0.0})
+    # two keyframes 3 m apart in the odometry's frame of one pass are no drive's. Runs with no gap: a run allowed
+    # to go on past a keyframe joins every other one (test_a_run_goes_on_past_a_keyframe_that_sees_nothing).
+    update = {"consistent_distance": consistent_distance, "query_radius": 0.0, "run_gap": 0}
+    config = MATCHING.model_copy(update=update)
     detector = LoopClosureDetector(KEYFRAMES, config)
     passes.first_pass(detector)
     drift = passes.yaw_pose(DRIFT_YAW, DRIFT)
@@ -292,10 +324,10 @@ def test_the_block_route_closes_loops_with_full_precision(tmp_path: Path) -> Non
     assert len(set(keyframe_ids)) == len(keyframe_ids)  # each keyframe closes at most one loop
 
 
-def _detected_closures(dataset) -> tuple[list, list]:
+def _detected_closures(dataset, matching: MatchingConfig = MATCHING) -> tuple[list, list]:
     """Keyframes and the closures the loop detector accepts, with the keyframes and the detector driven the way
     the pipeline drives them (odometry poses, odometer of planar motion), but without the rest of the pipeline."""
-    builder, detector = KeyframeBuilder(KEYFRAMES), LoopClosureDetector(KEYFRAMES, MATCHING)
+    builder, detector = KeyframeBuilder(KEYFRAMES), LoopClosureDetector(KEYFRAMES, matching)
     closures, previous = [], None
     for frame in dataset.frames():
         horizontal, _, vertical = planar_motion(
@@ -312,10 +344,11 @@ def _detected_closures(dataset) -> tuple[list, list]:
 
 
 @pytest.mark.slow
-def test_the_town_route_is_not_fooled_by_its_repeated_layout(tmp_path: Path) -> None:
+@pytest.mark.parametrize("evidence", ["keyframe", "run"])
+def test_the_town_route_is_not_fooled_by_its_repeated_layout(tmp_path: Path, evidence: str) -> None:
     write_dataset(tmp_path / "town", simulate_route("town", SimulatorConfig(seed=0, detection_profile="ideal")))
     dataset = read_dataset(tmp_path / "town")
-    keyframes, closures = _detected_closures(dataset)
+    keyframes, closures = _detected_closures(dataset, MATCHING.model_copy(update={"evidence": evidence}))
     repeat = ROUTES["town"].repeats[0]
     xy = dataset.ground_truth.positions[:, :2]
 

@@ -1,5 +1,6 @@
-"""A later session's relocalisation in a stored map (loop.relocaliser): evidence that accumulates over a run of
-keyframes, each matched object counted once, and no relocalisation on streets the map does not hold."""
+"""Evidence that accumulates over a run of keyframes (loop.runs), each matched object counted once: a later
+session's relocalisation in a stored map (loop.relocaliser), and the loop detector within a session with
+`matching.evidence: run`; neither closes a loop on streets the map does not hold."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import pytest
 
 from neoslam.config import KeyframeConfig, MapStoreConfig, MatchingConfig
 from neoslam.geometry import transform_points
+from neoslam.loop.detector import LoopClosureDetector
 from neoslam.loop.relocaliser import MapRelocaliser
 from neoslam.types import Keyframe
 
@@ -50,15 +52,29 @@ def stored_map(make_street, make_keyframe, make_yaw_pose):
     return streets, stored
 
 
-def _session(make_keyframe, make_yaw_pose, street, relocaliser, seed, first_id=10_000):
-    """The session's closures per keyframe along the street, from a frame turned and moved from the map's."""
+def _session(make_keyframe, make_yaw_pose, street, relocaliser, seed, first_id=10_000, odometer=0.0):
+    """The session's closures per keyframe along the street, from a frame turned and moved from the map's;
+    `odometer`, the reading at its first keyframe."""
     rng = np.random.default_rng(seed)
     frame = make_yaw_pose(0.6, (35.0, -20.0, 0.0))
     closures = []
     for j, x in enumerate(SESSION_X):
         keyframe = _keyframe(make_keyframe, street, rng, x, frame, first_id + j, SEEN)
-        closures.append(relocaliser.query(keyframe, 0.0))
+        closures.append(relocaliser.query(keyframe, odometer + (x - SESSION_X[0])))
     return closures
+
+
+# Within a session: the stored streets were driven a kilometre before (the odometry may have drifted the 40 m and
+# 34° of the session's frame since), every stored keyframe within the search radius, as in the whole map.
+IN_SESSION = {"search_radius": 1e5, "drift_radius": 40.0}
+ODOMETER = 1000.0
+
+
+def _in_session(stored, evidence: str) -> LoopClosureDetector:
+    detector = LoopClosureDetector(KeyframeConfig(), MatchingConfig(evidence=evidence, **IN_SESSION))
+    for keyframe in stored:
+        detector.add(keyframe, 0.0)
+    return detector
 
 
 def _relocaliser(stored, evidence: str) -> MapRelocaliser:
@@ -131,3 +147,30 @@ def test_a_fresh_relocaliser_waits_for_consecutive_keyframes(stored_map, make_ke
         assert relocaliser._verified(keyframe, 0.0)  # it matches its place
         relocaliser = _relocaliser(stored, evidence)
         assert relocaliser.query(keyframe, 0.0) == []
+
+
+def test_within_a_session_a_run_closes_loops_where_each_keyframe_alone_shows_too_little(
+    stored_map, make_keyframe, make_yaw_pose
+) -> None:
+    """The same streets and sessions as above, driven within one session: each keyframe alone falls short of the
+    threshold of every stored keyframe it could have matched, a run of them does not, and every closure is right."""
+    streets, stored = stored_map
+    closed = {}
+    for evidence in ("keyframe", "run"):
+        sessions = [
+            _session(make_keyframe, make_yaw_pose, streets[0], _in_session(stored, evidence), seed, odometer=ODOMETER)
+            for seed in SESSIONS
+        ]
+        assert all(_right(c) for s in sessions for c in s)
+        closed[evidence] = sum(bool(c) for s in sessions for c in s)
+    assert closed["run"] >= 2 * max(closed["keyframe"], 5)
+
+
+def test_within_a_session_a_run_closes_nothing_on_a_street_the_map_does_not_hold(
+    stored_map, make_street, make_keyframe, make_yaw_pose
+) -> None:
+    _, stored = stored_map
+    for seed in SESSIONS:
+        stranger = make_street(np.random.default_rng(100 + seed), count=60, length=140.0)
+        detector = _in_session(stored, "run")
+        assert not any(_session(make_keyframe, make_yaw_pose, stranger, detector, seed, odometer=ODOMETER))

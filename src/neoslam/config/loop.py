@@ -314,7 +314,7 @@ class MatchingConfig(Section):
     )
     consistent_yaw_deg: float = Field(5.0, gt=0, le=180, description="and within this yaw, degrees")
     evidence: Literal["keyframe", "run"] = Field(
-        "keyframe",
+        "run",
         description="what a closure must show, min_evidence_bits plus log2 of the stored keyframes the query could "
         "have matched: keyframe, each of the consecutive keyframes alone; run, the consecutive keyframes that "
         "relocalise consistently together, each matched object counted once (a keyframe alone then needs "

@@ -318,10 +318,13 @@ class LoopClosureDetector:
     def _query_runs(self, keyframe: Keyframe, odometer_m: float) -> list[LoopClosure]:
         """query with evidence that accumulates (loop.runs): the closures of the last `consecutive` keyframes of
         the run that reaches the eligible keyframes' threshold at this keyframe."""
-        best = self.runs.extend(self._verified(keyframe, odometer_m), keyframe.id)
-        self._recent.append(None if best is None else best.steps[-1])  # its place is tried first by the next one
+        here = self.runs.extend(self._verified(keyframe, odometer_m), keyframe.id)
         needed = self.config.min_evidence_bits + np.log2(max(self._eligible, 1))
-        if best is None or not self.runs.accepted(best, needed, self.config.consecutive, self._joined):
+        accepted = (run for run in here if self.runs.accepted(run, needed, self.config.consecutive, self._joined))
+        best = next(accepted, None)
+        leading = best or (here[0] if here else None)
+        self._recent.append(None if leading is None else leading.steps[-1])  # tried first by the next keyframe
+        if best is None:
             return []
         # the closures of the last `consecutive` keyframes, the ones a pipeline still holds the poses of
         steps = [step for step in best.steps if step.keyframe_id > keyframe.id - self.config.consecutive]

@@ -17,8 +17,10 @@ one place for the robot, one heading) must show the full threshold together:
   the place's view), once however many keyframes contradict it.
 Runs are followed side by side (a keyframe may verify in several places), over at most `run_keyframes` keyframes,
 and go on past `run_gap` keyframes that relocalise nowhere (seeing too few objects shows nothing against a place);
-one that reaches the threshold at a keyframe that relocalised in it is taken unless a run that puts the robot
-elsewhere, in a place not joined to it, shows the threshold too and comes within `matching.ambiguity_bits` of it.
+the one with the most evidence that reaches the threshold at a keyframe that relocalised in it is taken (a run that
+has just begun in another pass of the place may carry more and not be long enough yet) unless a run that puts the
+robot elsewhere, in a place not joined to it, and that the keyframe relocalised in too, shows the threshold as well
+and comes within `matching.ambiguity_bits` of it.
 """
 
 from __future__ import annotations
@@ -79,11 +81,11 @@ class EvidenceRuns:
         disc = math.pi * config.consistent_distance**2
         self._later_spent_cap = max(math.log2(config.object_area / disc), 0.0)
 
-    def extend(self, found: list[Relocalisation], keyframe_id: int) -> Run | None:
-        """Follow the runs past this keyframe's relocalisations; the run with the most evidence that ends at it."""
+    def extend(self, found: list[Relocalisation], keyframe_id: int) -> list[Run]:
+        """Follow the runs past this keyframe's relocalisations; the runs that end at it, the most evidence first."""
         self.runs = self._extended(found, keyframe_id)
         here = [run for run in self.runs if run.steps[-1].keyframe_id == keyframe_id]
-        return max(here, key=lambda run: run.bits, default=None)
+        return sorted(here, key=lambda run: -run.bits)
 
     def _extended(self, found: list[Relocalisation], keyframe_id: int) -> list[Run]:
         """The runs that can go on after this keyframe: each of its relocalisations after the run it agrees with
@@ -108,13 +110,15 @@ class EvidenceRuns:
 
     def accepted(self, run: Run, needed: float, consecutive: int, joined: Callable[[Run, Run], bool]) -> bool:
         """Whether a run is `consecutive` keyframes long or more, shows the `needed` bits, and no other run that
-        shows them too puts the robot elsewhere (in a place not `joined` to it) and comes within ambiguity_bits of
-        it: as with keyframe evidence, where only keyframes that show the full threshold verify."""
+        its last keyframe relocalised in too, that shows them as well, puts the robot elsewhere (in a place not
+        `joined` to it) and comes within ambiguity_bits of it: as with keyframe evidence, where only keyframes that
+        show the full threshold verify. (A run its keyframe did not go on is no other place for that keyframe.)"""
         if len(run.steps) < consecutive or run.bits < needed:
             return False
         last = run.steps[-1]
         return not any(
             other is not run
+            and other.steps[-1].keyframe_id == last.keyframe_id
             and other.bits >= needed
             and other.bits > run.bits - self.config.ambiguity_bits
             and not self.consistent(last, other.steps[-1])
