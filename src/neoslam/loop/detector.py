@@ -320,8 +320,8 @@ class LoopClosureDetector:
         the run that reaches the eligible keyframes' threshold at this keyframe."""
         here = self.runs.extend(self._verified(keyframe, odometer_m), keyframe.id)
         needed = self.config.min_evidence_bits + np.log2(max(self._eligible, 1))
-        accepted = (run for run in here if self.runs.accepted(run, needed, self.config.consecutive, self._joined))
-        best = next(accepted, None)
+        taken = (run for run in here if self.runs.accepted(run, needed, self.config.consecutive, self._joined))
+        best = next(taken, None)
         leading = best or (here[0] if here else None)
         self._recent.append(None if leading is None else leading.steps[-1])  # tried first by the next keyframe
         if best is None:
