@@ -138,7 +138,8 @@ def test_candidates_are_the_keyframes_sharing_most_triangles_first(make_keyframe
         centres = query.centers.copy()
         centres[:replaced] = rng.uniform(-30, 30, (replaced, 3))
         index.add(make_keyframe(centres, query.labels, id=i), 0.0)
-    ranked, shared = index.ranked(query, index.eligible(query.pose[:3, 3], 100.0))
+    ranked, shared = index.best_first(query, index.eligible(query.pose[:3, 3], 100.0))
+    ranked = np.array(list(ranked))
     np.testing.assert_array_equal(ranked[:3], np.argsort(replaced_counts)[:3])
     assert shared[ranked[0]] > shared[ranked[-1]]
     assert index.nbytes > 0

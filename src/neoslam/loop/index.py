@@ -165,15 +165,11 @@ class KeyframeIndex:
             return scores[slots], shared
         return self._signatures[slots] @ signature(query), None
 
-    def ranked(self, query: Keyframe, eligible: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """The eligible ids (increasing), most alike to the query first, ties in the order given; and with
-        triangles, the number of triangle keys every stored keyframe (by slot) shares with the query."""
-        scores, shared = self._scores(query, eligible)
-        return eligible[np.argsort(-scores, kind="stable")], shared
-
     def best_first(self, query: Keyframe, eligible: np.ndarray) -> tuple[Iterator[int], np.ndarray | None]:
-        """ranked, the ids sorted a few at a time as they are read: a query tries a few places, and sorting every
-        eligible keyframe of a large map costs more than matching them."""
+        """The eligible ids (increasing), most alike to the query first, ties in the order given, sorted a few at a
+        time as they are read (a query tries a few places, and sorting every eligible keyframe of a large map costs
+        more than matching them); and with triangles, the number of triangle keys every stored keyframe (by slot)
+        shares with the query."""
         scores, shared = self._scores(query, eligible)
         return _best_first(eligible, scores), shared
 
