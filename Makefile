@@ -14,6 +14,8 @@ $(STAMP): pyproject.toml
 	# torch first, pinned to the CPU build, so that pip never resolves a CUDA build for it
 	$(BIN)/pip install --quiet torch==2.13.0
 	$(BIN)/pip install --quiet -e ".[test]"
+	# the place-matching kernels compiled once here (numba caches them beside their source), not in a first run
+	$(BIN)/python -m neoslam.loop.kernels
 	touch $(STAMP)
 
 setup: $(STAMP)

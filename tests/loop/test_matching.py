@@ -7,7 +7,7 @@ import pytest
 
 from neoslam.config import KeyframeConfig, MatchingConfig
 from neoslam.geometry import fit_yaw_translation, invert_pose, transform_points, yaw_of
-from neoslam.loop import verification
+from neoslam.loop import kernels, verification
 from neoslam.loop.matching import (
     KeyframeMatch,
     affinity_matrix,
@@ -346,13 +346,13 @@ def test_objects_a_metre_off_are_left_out_of_the_fit(
 
 def test_a_match_short_of_the_needed_count_is_given_up_before_the_fit(make_keyframe, make_street, monkeypatch) -> None:
     fits = []
-    fit_pairs = verification._fit_pairs
+    trimmed = kernels.trimmed
 
-    def counted_fit(pairs):
+    def counted_fit(pairs, *arguments):
         fits.append(len(pairs))
-        return fit_pairs(pairs)
+        return trimmed(pairs, *arguments)
 
-    monkeypatch.setattr(verification, "_fit_pairs", counted_fit)
+    monkeypatch.setattr(kernels, "trimmed", counted_fit)
     short, stored = _copy(make_keyframe, make_street, np.random.default_rng(6), 10, 4)  # 4 of 10 shared, 5 needed
     match = match_keyframes(short, stored, CONFIG, E_MAX)
     assert not match.verified and match.n_matches == 4 and fits == []
@@ -479,13 +479,13 @@ def test_a_match_without_distance_consistent_support_is_left_out_before_the_fit(
     chosen = spectral_matching(affinity_matrix(query, stored, candidates, E_MAX), candidates, TOLERANT)
     assert [4, 4] in candidates[chosen].tolist()  # the truck pair is chosen ...
     fits = []
-    fit_pairs = verification._fit_pairs
+    trimmed = kernels.trimmed
 
-    def counted_fit(pairs):
+    def counted_fit(pairs, *arguments):
         fits.append(len(pairs))
-        return fit_pairs(pairs)
+        return trimmed(pairs, *arguments)
 
-    monkeypatch.setattr(verification, "_fit_pairs", counted_fit)
+    monkeypatch.setattr(kernels, "trimmed", counted_fit)
     match = match_keyframes(query, stored, TOLERANT, E_MAX)
     assert fits[0] == 4  # ... and never reaches the fit
     assert match.verified and sorted(match.pairs.tolist()) == [[0, 0], [1, 1], [2, 2], [3, 3]]

@@ -28,12 +28,12 @@ on simulated KITTI 00 with `heavy` odometry, where parked objects are often prov
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from neoslam.config import MatchingConfig
+from neoslam.loop import kernels
 from neoslam.loop.verification import (
     contradicted_objects,
     contradictions,
@@ -123,10 +123,8 @@ def candidate_assignments(
 def distance_variances(keyframe: Keyframe, centre_sigma: float) -> np.ndarray:
     """(n, n) variance of each pairwise distance e_ij (eq. 1), from the two centres' ground-plane covariances along
     the line between them, each with `centre_sigma` added."""
-    offset = keyframe.centers[None, :, :2] - keyframe.centers[:, None, :2]
-    direction = offset / np.maximum(np.linalg.norm(offset, axis=2), 1e-9)[:, :, None]
-    along = np.einsum("nmi,mij,nmj->nm", direction, keyframe.covariances, direction)
-    return along + along.T + 2.0 * centre_sigma**2
+    centres = np.ascontiguousarray(keyframe.centers[:, :2], dtype=float)
+    return kernels.distance_variances(centres, keyframe.covariances, 2.0 * centre_sigma**2)
 
 
 def affinity_matrix(
@@ -139,37 +137,20 @@ def affinity_matrix(
     """M over the candidates (eq. 2, 4): e_max − |e_ij − e_i'j'| clipped at 0, or with `tolerances: covariance`
     e_max · (1 − |e_ij − e_i'j'| / tolerance) clipped at 0, the tolerance at least e_max and `affinity_sigmas`
     standard deviations of the difference; 0 for assignments in conflict. Without a config: the paper's form."""
-    q, s = candidates[:, 0], candidates[:, 1]
     query_keyframe = query.keyframe if isinstance(query, MatchSide) else query
     stored_keyframe = stored.keyframe if isinstance(stored, MatchSide) else stored
-    # in place, on the (c, c) arrays: the same arithmetic as the formulas above, without their temporaries
-    affinity = _rows_and_columns(query_keyframe.distances, q)
-    affinity -= _rows_and_columns(stored_keyframe.distances, s)
-    difference = np.abs(affinity, out=affinity)
-    if config is None or config.tolerances == "fixed":
-        np.subtract(e_max, difference, out=affinity)
-        np.maximum(affinity, 0.0, out=affinity)
-    else:
+    covariance = config is not None and config.tolerances != "fixed"
+    if covariance:
         query, stored = match_side(query, config), match_side(stored, config)
-        tolerance = _rows_and_columns(query.variances, q)
-        tolerance += _rows_and_columns(stored.variances, s)
-        np.sqrt(tolerance, out=tolerance)
-        tolerance *= config.affinity_sigmas
-        np.maximum(tolerance, e_max, out=tolerance)
-        difference /= tolerance
-        np.subtract(1.0, difference, out=affinity)
-        np.maximum(affinity, 0.0, out=affinity)
-        affinity *= e_max
-    conflict = _rows_and_columns(np.eye(len(query_keyframe.labels), dtype=bool), q)  # one object cannot match two
-    conflict |= _rows_and_columns(np.eye(len(stored_keyframe.labels), dtype=bool), s)
-    np.putmask(affinity, conflict, 0.0)
-    return affinity
-
-
-def _rows_and_columns(matrix: np.ndarray, indices: np.ndarray) -> np.ndarray:
-    """matrix[np.ix_(indices, indices)], a copy: taken by rows, then by columns, several times faster for the
-    hundreds of candidates of a place."""
-    return matrix.take(indices, axis=0).take(indices, axis=1)
+        query_variances, stored_variances, sigmas = query.variances, stored.variances, config.affinity_sigmas
+    else:
+        query_variances = stored_variances = np.zeros((0, 0))
+        sigmas = 0.0
+    return kernels.affinity(
+        query_keyframe.distances, stored_keyframe.distances, query_variances, stored_variances,
+        np.ascontiguousarray(candidates[:, 0]), np.ascontiguousarray(candidates[:, 1]), float(e_max), float(sigmas),
+        covariance,
+    )  # fmt: skip
 
 
 def principal_eigenvector(affinity: np.ndarray, iterations: int = 100, tolerance: float = 1e-9) -> np.ndarray:
@@ -178,19 +159,7 @@ def principal_eigenvector(affinity: np.ndarray, iterations: int = 100, tolerance
     Iterating on M + I keeps the same eigenvectors and breaks the tie of eigenvalues +λ and −λ (a bipartite
     consistency graph), on which plain iteration oscillates. Stops after `iterations` products or once no entry
     moves by more than `tolerance`."""
-    if not affinity.any():  # no pair of assignments agrees: nothing to rank
-        return np.zeros(len(affinity))
-    vector = np.full(len(affinity), 1.0 / np.sqrt(len(affinity)))
-    change = np.empty_like(vector)
-    for _ in range(iterations):
-        product = affinity @ vector
-        product += vector
-        product /= math.sqrt(product @ product)  # never 0: (M + I) v >= v for the non-negative v
-        np.subtract(product, vector, out=change)
-        if np.abs(change, out=change).max() < tolerance:
-            return product
-        vector = product
-    return vector
+    return kernels.principal_eigenvector(np.asarray(affinity, dtype=float), iterations, tolerance)
 
 
 def spectral_matching(affinity: np.ndarray, candidates: np.ndarray, config: MatchingConfig | None = None) -> np.ndarray:
@@ -199,32 +168,14 @@ def spectral_matching(affinity: np.ndarray, candidates: np.ndarray, config: Matc
         return np.empty(0, dtype=int)
     config = config or MatchingConfig()
     weight = principal_eigenvector(affinity, config.power_iterations, config.power_tolerance)
-    chosen: list[int] = []
-    used_query: set[int] = set()
-    used_stored: set[int] = set()
-    most = min(len(np.unique(candidates[:, 0])), len(np.unique(candidates[:, 1])))  # one side is used up
-    order = np.argsort(-weight, kind="stable")
-    # plain lists: the loop visits up to every candidate, and numpy's per-element access costs most of it
-    for index, value, (i, j) in zip(order.tolist(), weight[order].tolist(), candidates[order].tolist(), strict=True):
-        if value <= 0 or len(chosen) == most:
-            break
-        if i in used_query or j in used_stored:
-            continue
-        chosen.append(index)
-        used_query.add(i)
-        used_stored.add(j)
-    return np.array(chosen, dtype=int)
+    query_objects, stored_objects = np.ascontiguousarray(candidates[:, 0]), np.ascontiguousarray(candidates[:, 1])
+    n_query, n_stored = int(query_objects.max()) + 1, int(stored_objects.max()) + 1
+    return kernels.greedy_assignment(weight, query_objects, stored_objects, n_query, n_stored)
 
 
 def _supported(affinity: np.ndarray, chosen: np.ndarray, min_support: int) -> np.ndarray:
     """Repeatedly drop matches with fewer than `min_support` distance-consistent partners among the others."""
-    keep = chosen
-    while len(keep):
-        support = (affinity[np.ix_(keep, keep)] > 0).sum(axis=1)
-        if (support >= min_support).all():
-            break
-        keep = keep[support >= min_support]
-    return keep
+    return kernels.supported(affinity, np.asarray(chosen, dtype=np.int64), min_support)
 
 
 def _required_matches(query: Keyframe, stored: Keyframe, config: MatchingConfig) -> float:
@@ -256,7 +207,7 @@ def match_keyframes(
     affinity = affinity_matrix(query_side, stored_side, candidates, e_max, config)
     needed = _required_matches(query, stored, config)
     chosen = spectral_matching(affinity, candidates, config)
-    score = float(affinity[np.ix_(chosen, chosen)].sum() / e_max) if len(chosen) else 0.0
+    score = kernels.group_sum(affinity, chosen) / e_max
     kept = _supported(affinity, chosen, config.min_support)
     pairs = candidates[kept]
     if len(kept) < needed or score <= config.score_threshold:
@@ -274,7 +225,7 @@ def match_keyframes(
         and np.count_nonzero(in_view) <= config.max_contradictions
         and (config.tolerances == "fixed" or evidence >= config.min_evidence_bits + np.log2(max(tested, 1)))
     )
-    verified_score = float(affinity[np.ix_(kept, kept)].sum() / e_max) if verified else 0.0
+    verified_score = kernels.group_sum(affinity, kept) / e_max if verified else 0.0
     return KeyframeMatch(
         query.id, stored.id, score, pairs, fit.transform, residual_rms, verified, verified_score, evidence, bits, spent,
         against, against_labels, in_view,

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from neoslam.config import MatchingConfig
+from neoslam.loop import kernels
 from neoslam.loop.index import StoredKeyframes
 from neoslam.loop.matching import MatchSide, match_side
 from neoslam.types import Keyframe
@@ -43,34 +44,6 @@ class Place:
         return self._side[0]
 
 
-def _kept_objects(
-    distance: np.ndarray, order: np.ndarray, association_radius: float
-) -> tuple[list[int], list[tuple[int, int]]]:
-    """Objects taken in `order`: each joins the nearest object kept before it within `association_radius` (the
-    first of equally near ones), else is kept. Returns the kept objects in order taken, and the (joined, kept) pairs.
-    A loop over plain lists of each object's few neighbours: numpy's per-call cost over a row per object is most of
-    a place's merge."""
-    rows, columns = np.nonzero(distance <= association_radius)  # by row, then column: the first nearest wins ties
-    near = distance[rows, columns].tolist()
-    bounds = np.searchsorted(rows, np.arange(len(distance) + 1)).tolist()
-    columns = columns.tolist()
-    standing = [False] * len(distance)
-    kept: list[int] = []
-    absorbed: list[tuple[int, int]] = []
-    for i in order.tolist():
-        nearest, nearest_distance = -1, 0.0
-        for k in range(bounds[i], bounds[i + 1]):
-            j = columns[k]
-            if standing[j] and (nearest < 0 or near[k] < nearest_distance):
-                nearest, nearest_distance = j, near[k]
-        if nearest >= 0:
-            absorbed.append((i, nearest))
-            continue
-        standing[i] = True
-        kept.append(i)
-    return kept, absorbed
-
-
 def merge_keyframes(keyframes: list[Keyframe], anchor: Keyframe, association_radius: float) -> Keyframe:
     """One keyframe holding the objects of `keyframes` (one odometry frame), same-label objects within
     `association_radius` merged into the best-known of them; id and pose of `anchor`. A merged object is
@@ -81,17 +54,15 @@ def merge_keyframes(keyframes: list[Keyframe], anchor: Keyframe, association_rad
     patches = np.concatenate([k.patches for k in keyframes])
     provisional = np.concatenate([k.provisional for k in keyframes]).tolist()
     order = np.argsort(np.trace(covariances, axis1=1, axis2=2), kind="stable")  # the best-known first
-    # np.linalg.norm over the ground plane written out, the same sums: many times faster
-    x, y = centers[:, 0], centers[:, 1]
-    dx, dy = x[:, None] - x, y[:, None] - y
-    distance = np.sqrt(dx * dx + dy * dy)
     label_codes: dict[str, int] = {}
-    codes = np.array([label_codes.setdefault(label, len(label_codes)) for label in labels])
-    distance[codes[:, None] != codes[None, :]] = np.inf  # objects of two labels are never one
-    kept, absorbed = _kept_objects(distance, order, association_radius)
+    codes = np.array([label_codes.setdefault(label, len(label_codes)) for label in labels], dtype=np.int64)
+    ground = np.ascontiguousarray(centers[:, :2], dtype=float)
+    joined = kernels.merged_objects(ground, codes, order, association_radius).tolist()
+    kept = [i for i in order.tolist() if joined[i] < 0]
     known = [not p for p in provisional]
-    for i, j in absorbed:
-        known[j] = known[j] or not provisional[i]
+    for i, j in enumerate(joined):
+        if j >= 0:
+            known[j] = known[j] or not provisional[i]
     keep = np.array(kept, dtype=int)
     return Keyframe(
         id=anchor.id,

@@ -1,0 +1,71 @@
+"""The inner loops of place matching, compiled with numba.
+
+A place match runs over a few dozen to a few hundred candidate assignments and a few to a few dozen fitted pairs,
+where numpy's cost per call, not the arithmetic, is what a place took: written out as loops and compiled, each of
+these takes microseconds. They are pure functions of arrays with the same arithmetic as the formulas their callers
+document (loop.matching: the affinity, eq. 2 and 4, and spectral matching, eq. 5; loop.verification: the weighted
+fit and its trimming). Compiled once per machine and cached beside their source (numba's `cache=True`); `make
+setup` compiles them (`python -m neoslam.loop.kernels`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from neoslam.loop.kernels.assignment import (
+    affinity,
+    distance_variances,
+    greedy_assignment,
+    group_sum,
+    merged_objects,
+    principal_eigenvector,
+    supported,
+)
+from neoslam.loop.kernels.contradiction import counterparts, ground, in_view, missed
+from neoslam.loop.kernels.fit import fit_pairs, pair_bits, pair_columns, pair_covariances, trimmed
+
+__all__ = [
+    "affinity", "distance_variances", "greedy_assignment", "group_sum", "merged_objects", "principal_eigenvector",
+    "supported", "counterparts", "ground", "in_view", "missed", "fit_pairs", "pair_bits", "pair_columns",
+    "pair_covariances", "trimmed", "compile_all",
+]  # fmt: skip
+
+
+def compile_all() -> None:
+    """Compile (or load from the cache) every kernel for the argument types matching passes them: a first run on a
+    machine otherwise compiles each when first called, some seconds in all."""
+    centres = np.array([[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [0.0, 3.0, 0.0]])
+    ground_points = np.ascontiguousarray(centres[:, :2])
+    covariances = np.repeat(np.eye(2)[None] * 0.1, 3, axis=0)
+    objects = np.arange(3, dtype=np.int64)
+    distances = np.sqrt(((ground_points[:, None] - ground_points[None]) ** 2).sum(axis=2))
+    variances = distance_variances(ground_points, covariances, 0.1)
+    matrix = affinity(distances, distances, variances, variances, objects, objects, 1.5, 2.5, True)
+    weight = principal_eigenvector(matrix, 50, 1e-5)
+    chosen = supported(matrix, greedy_assignment(weight, objects, objects, 3, 3), 1)
+    group_sum(matrix, chosen)
+    columns = pair_columns(centres, centres, covariances, covariances, 0.1)
+    fit_pairs(columns, 2)
+    found, yaw, *_, d2, _distances, _inliers = trimmed(columns, 2, 2.0, 9.2, 4.0, False)
+    pair_covariances(covariances, covariances, yaw, 0.1)
+    pair_bits(covariances, covariances, yaw, 0.1, d2, np.ones(3), 150.0)
+    counterparts(ground_points, objects, covariances, ground_points, objects, covariances, 2.5, 9.2, 0.1, True)
+    extent = ground(ground_points, np.zeros(2))
+    known = np.ones(3, dtype=np.bool_)
+    missed(
+        ground_points,
+        objects,
+        covariances,
+        known,
+        extent,
+        3.0,
+        ground_points,
+        objects,
+        covariances,
+        2.5,
+        9.2,
+        0.1,
+        True,
+    )
+    in_view(ground_points, np.zeros((1, 3)), 0.5)
+    merged_objects(ground_points, objects, objects, 2.5)
