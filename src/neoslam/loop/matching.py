@@ -146,11 +146,17 @@ def affinity_matrix(
     else:
         query_variances = stored_variances = np.zeros((0, 0))
         sigmas = 0.0
+    query_objects, stored_objects = _objects(candidates)
     return kernels.affinity(
-        query_keyframe.distances, stored_keyframe.distances, query_variances, stored_variances,
-        np.ascontiguousarray(candidates[:, 0]), np.ascontiguousarray(candidates[:, 1]), float(e_max), float(sigmas),
-        covariance,
+        query_keyframe.distances, stored_keyframe.distances, query_variances, stored_variances, query_objects,
+        stored_objects, float(e_max), float(sigmas), covariance,
     )  # fmt: skip
+
+
+def _objects(candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The query and stored objects of (c, 2) candidate assignments, as the kernels take them."""
+    candidates = np.asarray(candidates, dtype=np.int64).reshape(-1, 2)
+    return np.ascontiguousarray(candidates[:, 0]), np.ascontiguousarray(candidates[:, 1])
 
 
 def principal_eigenvector(affinity: np.ndarray, iterations: int = 100, tolerance: float = 1e-9) -> np.ndarray:
@@ -168,7 +174,7 @@ def spectral_matching(affinity: np.ndarray, candidates: np.ndarray, config: Matc
         return np.empty(0, dtype=int)
     config = config or MatchingConfig()
     weight = principal_eigenvector(affinity, config.power_iterations, config.power_tolerance)
-    query_objects, stored_objects = np.ascontiguousarray(candidates[:, 0]), np.ascontiguousarray(candidates[:, 1])
+    query_objects, stored_objects = _objects(candidates)
     n_query, n_stored = int(query_objects.max()) + 1, int(stored_objects.max()) + 1
     return kernels.greedy_assignment(weight, query_objects, stored_objects, n_query, n_stored)
 

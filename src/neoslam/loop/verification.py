@@ -188,12 +188,26 @@ def has_counterpart(
     `tolerances: covariance`) within the chi-square gate of the two centres' covariances (ground plane; covariances
     in one frame)."""
     codes, other_codes = _label_codes(labels, other_labels)
-    covariance = config.tolerances != "fixed"
     return kernels.counterparts(
         _plane(points), codes, np.asarray(covariances, dtype=float), _plane(others), other_codes,
-        np.asarray(other_covariances, dtype=float), config.contradiction_radius,
-        chi2_bound(config.inlier_probability, 2), 2.0 * config.centre_sigma**2, covariance,
+        np.asarray(other_covariances, dtype=float), *_counterpart_tolerances(config),
     )  # fmt: skip
+
+
+def _counterpart_tolerances(config: MatchingConfig) -> tuple[float, float, float, bool]:
+    """What kernels.counterparts asks: the radius, the d² gate, the floor of a centre's covariance and whether the
+    covariances count (`tolerances: covariance`)."""
+    return (
+        config.contradiction_radius, chi2_bound(config.inlier_probability, 2), 2.0 * config.centre_sigma**2,
+        config.tolerances != "fixed",
+    )  # fmt: skip
+
+
+def _inside(points: np.ndarray, known: np.ndarray, ground: tuple[float, float, float], margin: float) -> np.ndarray:
+    """Bool per (n, 2) point: known and at least `margin` inside the ground (x, y, radius) of the other keyframe."""
+    x, y, radius = ground
+    dx, dy = points[:, 0] - x, points[:, 1] - y
+    return known & (np.sqrt(dx * dx + dy * dy) <= radius - margin)
 
 
 def _turned(covariances: np.ndarray, transform: np.ndarray) -> np.ndarray:
@@ -220,15 +234,16 @@ def contradicted_objects(
     query_ground = kernels.ground(moved, _plane((transform @ query.pose)[None, :3, 3])[0])
     stored_ground = kernels.ground(stored_points, _plane(stored.pose[None, :3, 3])[0])
     query_codes, stored_codes = _label_codes(query.labels, stored.labels)
-    gate, floor = chi2_bound(config.inlier_probability, 2), 2.0 * config.centre_sigma**2
-    shared = (config.contradiction_radius, gate, floor, config.tolerances != "fixed")
-    query_missed = kernels.missed(
-        moved, query_codes, moved_cov, ~query.provisional, stored_ground, config.contradiction_margin,
-        stored_points, stored_codes, stored.covariances, *shared,
+    tolerances = _counterpart_tolerances(config)
+    query_missed = _inside(moved, ~query.provisional, stored_ground, config.contradiction_margin)
+    query_missed[query_missed] = ~kernels.counterparts(
+        moved[query_missed], query_codes[query_missed], moved_cov[query_missed], stored_points, stored_codes,
+        stored.covariances, *tolerances,
     )  # fmt: skip
-    stored_missed = kernels.missed(
-        stored_points, stored_codes, stored.covariances, ~stored.provisional, query_ground,
-        config.contradiction_margin, moved, query_codes, moved_cov, *shared,
+    stored_missed = _inside(stored_points, ~stored.provisional, query_ground, config.contradiction_margin)
+    stored_missed[stored_missed] = ~kernels.counterparts(
+        stored_points[stored_missed], stored_codes[stored_missed], stored.covariances[stored_missed], moved,
+        query_codes, moved_cov, *tolerances,
     )  # fmt: skip
     names = [label for label, out in zip(query.labels, query_missed.tolist(), strict=True) if out]
     names += [label for label, out in zip(stored.labels, stored_missed.tolist(), strict=True) if out]

@@ -21,12 +21,12 @@ from neoslam.loop.kernels.assignment import (
     principal_eigenvector,
     supported,
 )
-from neoslam.loop.kernels.contradiction import counterparts, ground, in_view, missed
+from neoslam.loop.kernels.contradiction import counterparts, ground, in_view
 from neoslam.loop.kernels.fit import fit_pairs, pair_bits, pair_columns, pair_covariances, trimmed
 
 __all__ = [
     "affinity", "distance_variances", "greedy_assignment", "group_sum", "merged_objects", "principal_eigenvector",
-    "supported", "counterparts", "ground", "in_view", "missed", "fit_pairs", "pair_bits", "pair_columns",
+    "supported", "counterparts", "ground", "in_view", "fit_pairs", "pair_bits", "pair_columns",
     "pair_covariances", "trimmed", "compile_all",
 ]  # fmt: skip
 
@@ -50,22 +50,6 @@ def compile_all() -> None:
     pair_covariances(covariances, covariances, yaw, 0.1)
     pair_bits(covariances, covariances, yaw, 0.1, d2, np.ones(3), 150.0)
     counterparts(ground_points, objects, covariances, ground_points, objects, covariances, 2.5, 9.2, 0.1, True)
-    extent = ground(ground_points, np.zeros(2))
-    known = np.ones(3, dtype=np.bool_)
-    missed(
-        ground_points,
-        objects,
-        covariances,
-        known,
-        extent,
-        3.0,
-        ground_points,
-        objects,
-        covariances,
-        2.5,
-        9.2,
-        0.1,
-        True,
-    )
+    ground(ground_points, np.zeros(2))
     in_view(ground_points, np.zeros((1, 3)), 0.5)
     merged_objects(ground_points, objects, objects, 2.5)

@@ -7,35 +7,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["counterparts", "ground", "missed", "in_view"]
-
-
-@njit(cache=True)
-def _has_counterpart(
-    point: np.ndarray,
-    code: int,
-    cov: np.ndarray,
-    others: np.ndarray,
-    other_codes: np.ndarray,
-    other_covariances: np.ndarray,
-    radius: float,
-    gate: float,
-    floor: float,
-    covariance: bool,
-) -> bool:
-    for j in range(len(others)):
-        if code != other_codes[j]:
-            continue
-        dx, dy = point[0] - others[j, 0], point[1] - others[j, 1]
-        if math.sqrt(dx * dx + dy * dy) <= radius:
-            return True
-        if covariance:
-            a = cov[0, 0] + other_covariances[j, 0, 0] + floor
-            b = cov[0, 1] + other_covariances[j, 0, 1]
-            d = cov[1, 1] + other_covariances[j, 1, 1] + floor
-            if (d * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / (a * d - b * b) <= gate:
-                return True
-    return False
+__all__ = ["counterparts", "ground", "in_view"]
 
 
 @njit(cache=True)
@@ -55,10 +27,20 @@ def counterparts(
     the d² `gate` of the two centres' ground covariances plus `floor` on the diagonal."""
     found = np.zeros(len(points), dtype=np.bool_)
     for i in range(len(points)):
-        found[i] = _has_counterpart(
-            points[i], codes[i], covariances[i], others, other_codes, other_covariances, radius, gate, floor,
-            covariance,
-        )  # fmt: skip
+        for j in range(len(others)):
+            if codes[i] != other_codes[j]:
+                continue
+            dx, dy = points[i, 0] - others[j, 0], points[i, 1] - others[j, 1]
+            if math.sqrt(dx * dx + dy * dy) <= radius:
+                found[i] = True
+                break
+            if covariance:
+                a = covariances[i, 0, 0] + other_covariances[j, 0, 0] + floor
+                b = covariances[i, 0, 1] + other_covariances[j, 0, 1]
+                d = covariances[i, 1, 1] + other_covariances[j, 1, 1] + floor
+                if (d * dx * dx - 2.0 * b * dx * dy + a * dy * dy) / (a * d - b * b) <= gate:
+                    found[i] = True
+                    break
     return found
 
 
@@ -76,36 +58,6 @@ def ground(centres: np.ndarray, robot: np.ndarray) -> tuple[float, float, float]
     for i in range(len(centres)):
         farthest = max(farthest, math.sqrt((centres[i, 0] - x) ** 2 + (centres[i, 1] - y) ** 2))
     return x, y, farthest
-
-
-@njit(cache=True)
-def missed(
-    points: np.ndarray,
-    codes: np.ndarray,
-    covariances: np.ndarray,
-    known: np.ndarray,
-    other_ground: tuple[float, float, float],
-    margin: float,
-    others: np.ndarray,
-    other_codes: np.ndarray,
-    other_covariances: np.ndarray,
-    radius: float,
-    gate: float,
-    floor: float,
-    covariance: bool,
-) -> np.ndarray:
-    """Bool per point: known, at least `margin` inside the other keyframe's ground (x, y, radius) and with no
-    counterpart among the others (counterparts)."""
-    x, y, extent = other_ground
-    out = np.zeros(len(points), dtype=np.bool_)
-    for i in range(len(points)):
-        if not known[i] or math.sqrt((points[i, 0] - x) ** 2 + (points[i, 1] - y) ** 2) > extent - margin:
-            continue
-        out[i] = not _has_counterpart(
-            points[i], codes[i], covariances[i], others, other_codes, other_covariances, radius, gate, floor,
-            covariance,
-        )  # fmt: skip
-    return out
 
 
 @njit(cache=True)
