@@ -237,6 +237,8 @@ def _speed_row(
         "query_ms_median": 1e3 * float(np.median(times["revisit"] + times["new"])),
         "query_ms_p95": 1e3 * float(np.percentile(times["revisit"] + times["new"], 95)),
         "index_mb": detector.index.nbytes / 1e6,
+        "keyframes_mb": sum(k.nbytes for k in detector.index.keyframes) / 1e6,
+        "places_mb": detector.places.nbytes / 1e6,
     }
 
 
@@ -402,14 +404,16 @@ def main(argv: list[str] | None = None) -> None:
     bench.table("misses", misses, ["sequence", *MISS_CLASSES])
     print("\n## (b) Query time (retrieval + matching + verification) against map size\n")
     speed_columns = ["eigenvector", "scope", "map_size", "queries", "eligible_median", "revisit_ms_median",
-                     "new_place_ms_median", "query_ms_median", "query_ms_p95", "index_mb"]  # fmt: skip
+                     "new_place_ms_median", "query_ms_median", "query_ms_p95", "index_mb", "keyframes_mb",
+                     "places_mb"]  # fmt: skip
     bench.table("speed", speed, speed_columns)
     largest = next(row for row in speed if row["eigenvector"] == "default" and row["map_size"] == max(sizes))
     whole = next(row for row in speed if row["scope"] == "whole map" and row["map_size"] == max(sizes))
     print(
         f"At {largest['map_size']} keyframes: median {largest['query_ms_median']:.2f} ms, new places "
         f"{largest['new_place_ms_median']:.2f} ms, revisits {largest['revisit_ms_median']:.2f} ms; searching the "
-        f"whole map: median {whole['query_ms_median']:.2f} ms; retrieval index {whole['index_mb']:.1f} MB."
+        f"whole map: median {whole['query_ms_median']:.2f} ms; retrieval index {whole['index_mb']:.1f} MB, stored "
+        f"keyframes {whole['keyframes_mb']:.0f} MB, cached places {whole['places_mb']:.0f} MB."
     )
     print("\n" + sweep_summary.replace("# Sweep", "Sweep", 1))
     bench.finish(

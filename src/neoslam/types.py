@@ -102,6 +102,12 @@ class Keyframe:
             total = total + offset * offset
         object.__setattr__(self, "distances", np.sqrt(total))
 
+    @property
+    def nbytes(self) -> int:
+        """Memory held by the keyframe's arrays, bytes."""
+        arrays = (self.pose, self.centers, self.patches, self.provisional, self.covariances, self.views, self.distances)
+        return sum(np.asarray(a).nbytes for a in arrays)
+
     def moved(self, transform: np.ndarray) -> Keyframe:
         """The same keyframe in another frame: pose and centres moved by `transform` (4, 4), the centres'
         covariances turned by its rotation in the ground plane."""

@@ -92,6 +92,18 @@ def test_a_place_is_kept_once_no_later_keyframe_can_join_it() -> None:
     assert cache.place(stored, 2) is inner  # made once
 
 
+def test_the_cache_keeps_the_places_last_asked_for() -> None:
+    stored = _stored(np.arange(0.0, 51.0, 5.0))
+    cache = PlaceCache(radius=12.0, association_radius=2.5, capacity=3)
+    first = cache.place(stored, 1)
+    for slot in (2, 3):
+        cache.place(stored, slot)
+    assert cache.place(stored, 1) is first and len(cache) == 3  # asked for again: now the newest
+    cache.place(stored, 4)  # one more: the least recently asked for (slot 2) goes
+    assert len(cache) == 3 and cache.place(stored, 1) is first
+    assert cache.place(stored, 2).members == (0, 1, 2, 3, 4)  # made again, the same place
+
+
 def _merged_by_rows(keyframes: list[Keyframe], anchor: Keyframe, association_radius: float) -> Keyframe:
     """merge_keyframes as its docstring says it, object by object over rows of numpy: the reference."""
     centers = np.concatenate([k.centers for k in keyframes])

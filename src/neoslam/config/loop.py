@@ -227,6 +227,13 @@ class MatchingConfig(Section):
         description="a retrieved keyframe is matched as a place: with the stored keyframes of its pass whose robot "
         "poses lie this close to its own, their objects merged (loop.places); 0: the keyframe alone",
     )
+    place_cache: int = Field(
+        1000,
+        ge=1,
+        le=1_000_000,
+        description="merged places kept for the queries that follow, the least recently matched dropped first: a "
+        "drive matches the few dozen places around it again and again, and a place holds about 60 kB",
+    )
     recentre_places: bool = Field(
         True,
         description="when a place's fit fails on more than max_contradictions objects in view, match once more the "

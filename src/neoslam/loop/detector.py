@@ -58,7 +58,7 @@ class LoopClosureDetector:
         self.e_max = keyframes.e_max
         self.config = matching
         self.index = KeyframeIndex(matching)
-        self.places = PlaceCache(matching.place_radius, keyframes.association_radius)
+        self.places = PlaceCache(matching.place_radius, keyframes.association_radius, matching.place_cache)
         self.joined = _JoinedPlaces()
         self._recent: deque[Relocalisation | None] = deque(maxlen=max(matching.consecutive - 1, 0))
         self._queried: deque[Keyframe] = deque(maxlen=QUERY_HISTORY)  # the last keyframes queried

@@ -93,6 +93,12 @@ class MatchSide:
     patch_squares: np.ndarray  # (n,) sum of squares of each patch
     variances: np.ndarray | None  # (n, n) distance_variances with `tolerances: covariance`, else None
 
+    @property
+    def nbytes(self) -> int:
+        """Memory held beside the keyframe's own arrays, bytes."""
+        variances = 0 if self.variances is None else self.variances.nbytes
+        return self.labels.nbytes + self.patches.nbytes + self.patch_squares.nbytes + variances
+
 
 def match_side(keyframe: Keyframe | MatchSide, config: MatchingConfig) -> MatchSide:
     """The keyframe's side of a match (a MatchSide is given back as it is)."""

@@ -15,6 +15,7 @@ the query window, loop.detector).
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -42,6 +43,11 @@ class Place:
         if not self._side:
             self._side.append(match_side(self.keyframe, config))
         return self._side[0]
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held by the merged keyframe and its share of matching once worked out, bytes."""
+        return self.keyframe.nbytes + sum(side.nbytes for side in self._side)
 
 
 def merge_keyframes(keyframes: list[Keyframe], anchor: Keyframe, association_radius: float) -> Keyframe:
@@ -85,21 +91,32 @@ def _distance(a: np.ndarray, b: np.ndarray) -> float:
 
 class PlaceCache:
     """The place of each stored keyframe, made when first asked for and kept once no later keyframe can join it
-    (while the stored keyframes are the same collection: a detector given a new index starts afresh)."""
+    (while the stored keyframes are the same collection: a detector given a new index starts afresh), at most
+    `capacity` of them: the least recently asked for goes first."""
 
-    def __init__(self, radius: float, association_radius: float) -> None:
+    def __init__(self, radius: float, association_radius: float, capacity: int = 1000) -> None:
         self.radius = radius
         self.association_radius = association_radius
-        self._places: dict[int, Place] = {}
+        self.capacity = capacity
+        self._places: OrderedDict[int, Place] = OrderedDict()
         self._of: StoredKeyframes | None = None
+
+    def __len__(self) -> int:
+        return len(self._places)
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held by the cached places, bytes."""
+        return sum(place.nbytes for place in self._places.values())
 
     def place(self, stored: StoredKeyframes, slot: int) -> Place:
         """The place of the keyframe stored `slot`-th."""
         if stored is not self._of:
-            self._places, self._of = {}, stored
+            self._places, self._of = OrderedDict(), stored
         anchor = stored.at(slot)
         cached = self._places.get(anchor.id)
         if cached is not None:
+            self._places.move_to_end(anchor.id)
             return cached
         first = last = slot
         position = anchor.pose[:2, 3]
@@ -112,4 +129,6 @@ class PlaceCache:
         place = Place(merged, tuple(k.id for k in members))
         if last + 1 < len(stored):  # a keyframe beyond the place is stored: no later one can join it
             self._places[anchor.id] = place
+            if len(self._places) > self.capacity:
+                self._places.popitem(last=False)
         return place
