@@ -129,8 +129,7 @@ def candidate_assignments(
 def distance_variances(keyframe: Keyframe, centre_sigma: float) -> np.ndarray:
     """(n, n) variance of each pairwise distance e_ij (eq. 1), from the two centres' ground-plane covariances along
     the line between them, each with `centre_sigma` added."""
-    centres = np.ascontiguousarray(keyframe.centers[:, :2], dtype=float)
-    return kernels.distance_variances(centres, keyframe.covariances, 2.0 * centre_sigma**2)
+    return kernels.distance_variances(kernels.plane(keyframe.centers), keyframe.covariances, 2.0 * centre_sigma**2)
 
 
 def affinity_matrix(

@@ -60,10 +60,8 @@ def merge_keyframes(keyframes: list[Keyframe], anchor: Keyframe, association_rad
     patches = np.concatenate([k.patches for k in keyframes])
     provisional = np.concatenate([k.provisional for k in keyframes]).tolist()
     order = np.argsort(np.trace(covariances, axis1=1, axis2=2), kind="stable")  # the best-known first
-    label_codes: dict[str, int] = {}
-    codes = np.array([label_codes.setdefault(label, len(label_codes)) for label in labels], dtype=np.int64)
-    ground = np.ascontiguousarray(centers[:, :2], dtype=float)
-    joined = kernels.merged_objects(ground, codes, order, association_radius).tolist()
+    (codes,) = kernels.label_codes(labels)
+    joined = kernels.merged_objects(kernels.plane(centers), codes, order, association_radius).tolist()
     kept = [i for i in order.tolist() if joined[i] < 0]
     known = [not p for p in provisional]
     for i, j in enumerate(joined):

@@ -160,19 +160,7 @@ def fit_consistent(fit: FitResult, config: MatchingConfig) -> bool:
 def in_view(points: np.ndarray, views: np.ndarray, half_angle_deg: float) -> np.ndarray:
     """Bool per ground point (n, 2): within `half_angle_deg` of the heading of one of the views (m, 3) of x, y,
     yaw, seen from its position."""
-    return kernels.in_view(_plane(points), _plane(views, 3), math.radians(half_angle_deg))
-
-
-def _plane(points: np.ndarray, columns: int = 2) -> np.ndarray:
-    """The first `columns` columns of (n, >= columns) points as a contiguous float array, as the kernels take it."""
-    return np.ascontiguousarray(np.asarray(points, dtype=float)[:, :columns])
-
-
-def _label_codes(labels, other_labels) -> tuple[np.ndarray, np.ndarray]:
-    """Integer codes of two label sequences, equal where the labels are."""
-    codes: dict[str, int] = {}
-    first = np.array([codes.setdefault(label, len(codes)) for label in labels], dtype=np.int64)
-    return first, np.array([codes.setdefault(label, len(codes)) for label in other_labels], dtype=np.int64)
+    return kernels.in_view(kernels.plane(points), kernels.plane(views, 3), math.radians(half_angle_deg))
 
 
 def has_counterpart(
@@ -187,9 +175,9 @@ def has_counterpart(
     """Bool per point: an object of the same label stands among the others within `contradiction_radius` or (with
     `tolerances: covariance`) within the chi-square gate of the two centres' covariances (ground plane; covariances
     in one frame)."""
-    codes, other_codes = _label_codes(labels, other_labels)
+    codes, other_codes = kernels.label_codes(labels, other_labels)
     return kernels.counterparts(
-        _plane(points), codes, np.asarray(covariances, dtype=float), _plane(others), other_codes,
+        kernels.plane(points), codes, np.asarray(covariances, dtype=float), kernels.plane(others), other_codes,
         np.asarray(other_covariances, dtype=float), *_counterpart_tolerances(config),
     )  # fmt: skip
 
@@ -228,12 +216,12 @@ def contradicted_objects(
     """The contradicted objects (contradictions): their ground positions (m, 2) in the stored world, labels, and
     whether each stands in view of the other keyframe (in_view with `contradiction_view_deg` of one of the robot
     poses its objects were seen from)."""
-    moved = _plane(transform_points(transform, query.centers))
+    moved = kernels.plane(transform_points(transform, query.centers))
     moved_cov = np.ascontiguousarray(_turned(query.covariances, transform))
-    stored_points = _plane(stored.centers)
-    query_ground = kernels.ground(moved, _plane((transform @ query.pose)[None, :3, 3])[0])
-    stored_ground = kernels.ground(stored_points, _plane(stored.pose[None, :3, 3])[0])
-    query_codes, stored_codes = _label_codes(query.labels, stored.labels)
+    stored_points = kernels.plane(stored.centers)
+    query_ground = kernels.ground(moved, kernels.plane((transform @ query.pose)[None, :3, 3])[0])
+    stored_ground = kernels.ground(stored_points, kernels.plane(stored.pose[None, :3, 3])[0])
+    query_codes, stored_codes = kernels.label_codes(query.labels, stored.labels)
     tolerances = _counterpart_tolerances(config)
     query_missed = _inside(moved, ~query.provisional, stored_ground, config.contradiction_margin)
     query_missed[query_missed] = ~kernels.counterparts(

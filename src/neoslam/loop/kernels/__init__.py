@@ -27,8 +27,22 @@ from neoslam.loop.kernels.fit import fit_pairs, pair_bits, pair_columns, pair_co
 __all__ = [
     "affinity", "distance_variances", "greedy_assignment", "group_sum", "merged_objects", "principal_eigenvector",
     "supported", "counterparts", "ground", "in_view", "fit_pairs", "pair_bits", "pair_columns",
-    "pair_covariances", "trimmed", "compile_all",
+    "pair_covariances", "trimmed", "plane", "label_codes", "compile_all",
 ]  # fmt: skip
+
+
+def plane(points: np.ndarray, columns: int = 2) -> np.ndarray:
+    """The first `columns` columns of (n, >= columns) points (ground x, y by default) as a contiguous float array, as
+    the kernels take them."""
+    return np.ascontiguousarray(np.asarray(points, dtype=float)[:, :columns])
+
+
+def label_codes(*sequences) -> tuple[np.ndarray, ...]:
+    """Integer codes (int64) of label sequences, equal across them where the labels are."""
+    codes: dict[str, int] = {}
+    return tuple(
+        np.array([codes.setdefault(label, len(codes)) for label in labels], dtype=np.int64) for labels in sequences
+    )
 
 
 def compile_all() -> None:
