@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from itertools import combinations
+
 import numpy as np
 import pytest
 from scipy.optimize import least_squares
@@ -49,10 +51,19 @@ def test_the_affinity_is_eq_2_and_4_over_the_candidates(seed: int, covariance: b
     else:
         expected = np.maximum(e_max - difference, 0.0)
     expected[(q[:, None] == q[None, :]) | (s[:, None] == s[None, :])] = 0.0  # one object cannot match two
-    found = kernels.affinity(
-        _distances(query), _distances(stored), query_var, stored_var, q, s, e_max, sigmas, covariance
-    )
+    arguments = (_distances(query), _distances(stored), query_var, stored_var, q, s, e_max, sigmas, covariance)
+    found = kernels.affinity(*arguments)
     np.testing.assert_allclose(found, expected, rtol=1e-12, atol=1e-15)
+    # the compressed rows matching builds hold the same entries, bit for bit, each row's columns increasing
+    for built, dense in zip(kernels.sparse_affinity(*arguments), kernels.compressed(found), strict=True):
+        np.testing.assert_array_equal(built, dense)
+
+
+def test_a_block_is_the_matrix_at_the_indices() -> None:
+    rng = np.random.default_rng(2)
+    matrix = rng.uniform(0, 1, (30, 30)) * (rng.uniform(0, 1, (30, 30)) < 0.2)
+    indices = rng.permutation(30)[:9].astype(np.int64)
+    np.testing.assert_array_equal(kernels.block(*kernels.compressed(matrix), indices), matrix[np.ix_(indices, indices)])
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -62,8 +73,9 @@ def test_the_power_iteration_finds_the_principal_eigenvector(seed: int) -> None:
     matrix = matrix + matrix.T
     values, vectors = np.linalg.eigh(matrix)
     principal = np.abs(vectors[:, -1])
-    np.testing.assert_allclose(kernels.principal_eigenvector(matrix, 10_000, 1e-12), principal, atol=1e-8)
-    assert not kernels.principal_eigenvector(np.zeros((5, 5)), 50, 1e-5).any()
+    found = kernels.principal_eigenvector(*kernels.compressed(matrix), 10_000, 1e-12)
+    np.testing.assert_allclose(found, principal, atol=1e-8)
+    assert not kernels.principal_eigenvector(*kernels.compressed(np.zeros((5, 5))), 50, 1e-5).any()
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -125,3 +137,129 @@ def test_merging_joins_each_object_to_the_nearest_kept_one_of_its_label() -> Non
         else:
             assert joined[i] == -1
             kept.append(i)
+
+
+def test_the_kept_objects_are_the_unjoined_ones_provisional_only_when_all_their_estimates_are() -> None:
+    rng = np.random.default_rng(6)
+    points = rng.uniform(0, 6, (30, 2))
+    codes = rng.integers(0, 3, 30).astype(np.int64)
+    order = rng.permutation(30).astype(np.int64)
+    provisional = rng.random(30) < 0.6
+    joined = kernels.merged_objects(points, codes, order, 1.5)
+    keep, kept_provisional = kernels.kept_objects(points, codes, order, 1.5, provisional)
+    assert keep.tolist() == [i for i in order.tolist() if joined[i] < 0]
+    for i, flag in zip(keep.tolist(), kept_provisional.tolist(), strict=True):
+        estimates = [i, *np.flatnonzero(joined == i).tolist()]
+        assert flag == all(provisional[j] for j in estimates)
+
+
+def _ground(points: np.ndarray, robot: np.ndarray) -> tuple[np.ndarray, float]:
+    centre = points[np.argmin(np.linalg.norm(points - robot, axis=1))]
+    return centre, float(np.linalg.norm(points - centre, axis=1).max())
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_missed_objects_are_known_well_inside_the_other_ground_with_no_counterpart(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    here, here_cov = _scene(rng, 12)
+    there, there_cov = _scene(rng, 10)
+    there[:6] = here[:6] + rng.normal(0, 0.5, (6, 2))  # a shared part, the rest strangers
+    codes, other_codes = rng.integers(0, 2, 12).astype(np.int64), rng.integers(0, 2, 10).astype(np.int64)
+    other_codes[:6] = codes[:6]
+    known, other_known = rng.random(12) < 0.8, rng.random(10) < 0.8
+    robot, other_robot = rng.uniform(-5, 5, 2), rng.uniform(-5, 5, 2)
+    margin, radius, gate, floor = 2.0, 1.0, 9.21, 0.1
+    found = kernels.missed_objects(
+        here, codes, here_cov, known, robot, there, other_codes, there_cov, other_known, other_robot, margin, radius,
+        gate, floor, True,
+    )  # fmt: skip
+
+    def missed(points, point_codes, covs, point_known, others, others_codes, others_covs, others_robot):
+        centre, reach = _ground(others, others_robot)
+        expected = []
+        for p, code, cov, is_known in zip(points, point_codes, covs, point_known, strict=True):
+            inside = is_known and np.linalg.norm(p - centre) <= reach - margin
+            counterpart = any(
+                code == other_code
+                and (
+                    np.linalg.norm(p - other) <= radius
+                    or (p - other) @ np.linalg.inv(cov + other_cov + floor * np.eye(2)) @ (p - other) <= gate
+                )
+                for other, other_code, other_cov in zip(others, others_codes, others_covs, strict=True)
+            )
+            expected.append(bool(inside and not counterpart))
+        return expected
+
+    assert found[0].tolist() == missed(here, codes, here_cov, known, there, other_codes, there_cov, other_robot)
+    assert found[1].tolist() == missed(there, other_codes, there_cov, other_known, here, codes, here_cov, robot)
+
+
+def _reference_keys(
+    centres: np.ndarray, robot: np.ndarray, codes: np.ndarray, max_objects: int, max_side: float, side_bin: float,
+    spread: bool,
+) -> np.ndarray:  # fmt: skip
+    """loop.triangles' keys written with numpy: every three of the objects nearest the current one, sides sorted."""
+    current = np.argmin(np.linalg.norm(centres - robot, axis=1))
+    nearest = np.argsort(np.linalg.norm(centres - centres[current], axis=1), kind="stable")[:max_objects]
+    triples = nearest[np.array(list(combinations(range(len(nearest)), 3)), dtype=np.int64).reshape(-1, 3)]
+    points = centres[triples]
+    sides = np.linalg.norm(points[:, [1, 2, 0]] - points[:, [2, 0, 1]], axis=2)  # side opposite each vertex
+    order = np.argsort(sides, axis=1, kind="stable")
+    sides, labels = np.take_along_axis(sides, order, axis=1), np.take_along_axis(codes[triples], order, axis=1)
+    labels, sides = labels[sides[:, 2] <= max_side], sides[sides[:, 2] <= max_side]
+    bins = np.floor(sides / side_bin).astype(np.int64)
+    choices = [np.zeros(3, dtype=bool)]
+    if spread:
+        choices = list(((np.arange(8)[:, None] >> np.arange(3)) & 1).astype(bool))
+    neighbour = np.where(sides / side_bin - bins >= 0.5, bins + 1, bins - 1)
+    keys = []
+    for choice in choices:
+        chosen = np.where(choice, neighbour, bins)
+        valid = ((chosen >= 0) & (chosen < 256)).all(axis=1) if spread else np.ones(len(chosen), dtype=bool)
+        key = np.zeros(int(valid.sum()), dtype=np.int64)
+        for column in range(3):
+            key = (key << 6) | labels[valid, column]
+        for column in range(3):
+            key = (key << 8) | chosen[valid, column]
+        keys.append(key)
+    return np.unique(np.concatenate(keys))
+
+
+@pytest.mark.parametrize("spread", [False, True])
+@pytest.mark.parametrize("seed", range(4))
+def test_triangle_keys_are_the_sorted_sides_and_labels_packed(seed: int, spread: bool) -> None:
+    rng = np.random.default_rng(seed)
+    centres = rng.uniform(-25, 25, (int(rng.integers(3, 20)), 2))
+    codes = rng.integers(1, 5, len(centres)).astype(np.int64)
+    robot = rng.uniform(-5, 5, 2)
+    found = kernels.triangle_keys(centres, robot, codes, 8, 30.0, 0.75, spread, 6, 8)
+    np.testing.assert_array_equal(found, _reference_keys(centres, robot, codes, 8, 30.0, 0.75, spread))
+    assert len(kernels.triangle_keys(centres[:2], robot, codes[:2], 8, 30.0, 0.75, spread, 6, 8)) == 0
+
+
+def test_triangle_scores_are_the_summed_idf_over_the_root_of_the_keys() -> None:
+    rng = np.random.default_rng(4)
+    stored = 40
+    per_slot = [np.unique(rng.integers(0, 60, int(rng.integers(0, 25)))) for _ in range(stored)]
+    keys = np.concatenate(per_slot).astype(np.int64)
+    slots = np.concatenate([np.full(len(k), slot) for slot, k in enumerate(per_slot)]).astype(np.int32)
+    main = slots < 30  # the first 30 keyframes merged, the last 10 in the tail
+    order = np.argsort(keys[main], kind="stable")
+    tail_order = np.argsort(keys[~main], kind="stable")
+    query = np.unique(rng.integers(0, 80, 30)).astype(np.int64)
+    counts = np.array([len(k) for k in per_slot], dtype=float)
+    scores, shared = kernels.triangle_scores(
+        keys[main][order], slots[main][order], keys[~main][tail_order], slots[~main][tail_order], query, counts
+    )
+    holding = np.array([[key in set(k.tolist()) for k in per_slot] for key in query.tolist()])  # (keys, slots)
+    idf = np.log((stored + 1.0) / (holding.sum(axis=1) + 0.5))
+    np.testing.assert_array_equal(shared, holding.sum(axis=0))
+    np.testing.assert_allclose(
+        scores, (idf[:, None] * holding).sum(axis=0) / np.sqrt(np.maximum(counts, 1)), rtol=1e-12
+    )
+
+
+def test_label_codes_are_equal_where_the_labels_are_across_calls() -> None:
+    (first,) = kernels.label_codes(("car", "truck", "car"))
+    second, third = kernels.label_codes(["truck", "bicycle"], ("car",))
+    assert first[0] == first[2] == third[0] != first[1] == second[0] != second[1]

@@ -103,6 +103,9 @@ class KeyframeIndex:
         self._signatures = np.zeros((INITIAL_CAPACITY, LABEL_BINS + len(DISTANCE_BINS) - 1))
         self._label_counts: dict[str, int] = {}
         self._triangles = TriangleIndex(config.triangle_side_bin, config.triangle_objects, config.triangle_max_side)
+        # the last eligible ids and their slots: a query ranks the ids `eligible` gave it, and finding 10,000 slots
+        # of 20,000 stored by search costs a third of a millisecond
+        self._last_eligible: tuple[np.ndarray, np.ndarray] | None = None
 
     def __len__(self) -> int:
         return len(self.keyframes)
@@ -140,6 +143,8 @@ class KeyframeIndex:
         return float(self._odometer[self._slots[int(keyframe_id)]])
 
     def _slots_of(self, keyframe_ids: np.ndarray) -> np.ndarray:
+        if self._last_eligible is not None and keyframe_ids is self._last_eligible[0]:
+            return self._last_eligible[1]
         return np.searchsorted(self._ids[: len(self.keyframes)], keyframe_ids)
 
     def eligible(self, position: np.ndarray, odometer_m: float) -> np.ndarray:
@@ -149,7 +154,11 @@ class KeyframeIndex:
         radius = self.config.search_radius + self.config.search_radius_per_metre * travelled
         dx, dy = self._positions[:n, 0] - position[0], self._positions[:n, 1] - position[1]
         near = dx * dx + dy * dy <= radius * radius  # squared: no root over every stored keyframe
-        return self._ids[:n][near & (travelled >= self.config.exclude_recent_distance)]
+        slots = np.flatnonzero(near & (travelled >= self.config.exclude_recent_distance))
+        ids = self._ids[slots]
+        ids.flags.writeable = False  # known by identity to _slots_of
+        self._last_eligible = (ids, slots)
+        return ids
 
     def recent(self, keyframe_id: int, odometer_m: float) -> bool:
         """Whether a stored keyframe was made within the last `exclude_recent_distance` metres of travel."""

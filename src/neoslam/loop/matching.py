@@ -88,8 +88,8 @@ class MatchSide:
     `matching.candidates` places."""
 
     keyframe: Keyframe
-    labels: np.ndarray  # (n,) str
-    patches: np.ndarray  # (n, p) grey levels, float
+    labels: np.ndarray  # (n,) label codes (loop.kernels.label_codes)
+    patches: np.ndarray  # (n, p) grey levels, float: the keyframe's own when they are floats
     patch_squares: np.ndarray  # (n,) sum of squares of each patch
     variances: np.ndarray | None  # (n, n) distance_variances with `tolerances: covariance`, else None
 
@@ -97,16 +97,18 @@ class MatchSide:
     def nbytes(self) -> int:
         """Memory held beside the keyframe's own arrays, bytes."""
         variances = 0 if self.variances is None else self.variances.nbytes
-        return self.labels.nbytes + self.patches.nbytes + self.patch_squares.nbytes + variances
+        patches = 0 if np.may_share_memory(self.patches, self.keyframe.patches) else self.patches.nbytes
+        return self.labels.nbytes + patches + self.patch_squares.nbytes + variances
 
 
 def match_side(keyframe: Keyframe | MatchSide, config: MatchingConfig) -> MatchSide:
     """The keyframe's side of a match (a MatchSide is given back as it is)."""
     if isinstance(keyframe, MatchSide):
         return keyframe
-    patches = keyframe.patches.reshape(len(keyframe.patches), -1).astype(float)
+    patches = np.asarray(keyframe.patches.reshape(len(keyframe.patches), -1), dtype=float)
     variances = None if config.tolerances == "fixed" else distance_variances(keyframe, config.centre_sigma)
-    return MatchSide(keyframe, np.asarray(keyframe.labels), patches, (patches**2).sum(1), variances)
+    (codes,) = kernels.label_codes(keyframe.labels)
+    return MatchSide(keyframe, codes, patches, (patches**2).sum(1), variances)
 
 
 def _patch_rmse(query: MatchSide, stored: MatchSide) -> np.ndarray:
@@ -142,6 +144,25 @@ def affinity_matrix(
     """M over the candidates (eq. 2, 4): e_max − |e_ij − e_i'j'| clipped at 0, or with `tolerances: covariance`
     e_max · (1 − |e_ij − e_i'j'| / tolerance) clipped at 0, the tolerance at least e_max and `affinity_sigmas`
     standard deviations of the difference; 0 for assignments in conflict. Without a config: the paper's form."""
+    return kernels.affinity(*_affinity_arguments(query, stored, candidates, e_max, config))
+
+
+def _sparse_affinity(
+    query: MatchSide, stored: MatchSide, candidates: np.ndarray, e_max: float, config: MatchingConfig
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """affinity_matrix as compressed rows (starts, columns, values) of its non-zero entries, as matching uses it."""
+    return kernels.sparse_affinity(*_affinity_arguments(query, stored, candidates, e_max, config))
+
+
+def _affinity_arguments(
+    query: Keyframe | MatchSide,
+    stored: Keyframe | MatchSide,
+    candidates: np.ndarray,
+    e_max: float,
+    config: MatchingConfig | None,
+) -> tuple:
+    """What the affinity kernels take: the two keyframes' distances and their variances (none without `tolerances:
+    covariance`), the candidates' objects, e_max, `affinity_sigmas` and whether the covariances count."""
     query_keyframe = query.keyframe if isinstance(query, MatchSide) else query
     stored_keyframe = stored.keyframe if isinstance(stored, MatchSide) else stored
     covariance = config is not None and config.tolerances != "fixed"
@@ -152,7 +173,7 @@ def affinity_matrix(
         query_variances = stored_variances = np.zeros((0, 0))
         sigmas = 0.0
     query_objects, stored_objects = _objects(candidates)
-    return kernels.affinity(
+    return (
         query_keyframe.distances, stored_keyframe.distances, query_variances, stored_variances, query_objects,
         stored_objects, float(e_max), float(sigmas), covariance,
     )  # fmt: skip
@@ -170,15 +191,21 @@ def principal_eigenvector(affinity: np.ndarray, iterations: int = 100, tolerance
     Iterating on M + I keeps the same eigenvectors and breaks the tie of eigenvalues +λ and −λ (a bipartite
     consistency graph), on which plain iteration oscillates. Stops after `iterations` products or once no entry
     moves by more than `tolerance`."""
-    return kernels.principal_eigenvector(np.asarray(affinity, dtype=float), iterations, tolerance)
+    return kernels.principal_eigenvector(*kernels.compressed(np.asarray(affinity, dtype=float)), iterations, tolerance)
 
 
 def spectral_matching(affinity: np.ndarray, candidates: np.ndarray, config: MatchingConfig | None = None) -> np.ndarray:
     """Indices into `candidates` of X* (eq. 5): principal eigenvector, then greedy conflict-free discretisation."""
+    return _spectral(kernels.compressed(np.asarray(affinity, dtype=float)), candidates, config or MatchingConfig())
+
+
+def _spectral(
+    affinity: tuple[np.ndarray, np.ndarray, np.ndarray], candidates: np.ndarray, config: MatchingConfig
+) -> np.ndarray:
+    """spectral_matching of M as compressed rows."""
     if len(candidates) == 0:
         return np.empty(0, dtype=int)
-    config = config or MatchingConfig()
-    weight = principal_eigenvector(affinity, config.power_iterations, config.power_tolerance)
+    weight = kernels.principal_eigenvector(*affinity, config.power_iterations, config.power_tolerance)
     query_objects, stored_objects = _objects(candidates)
     n_query, n_stored = int(query_objects.max()) + 1, int(stored_objects.max()) + 1
     return kernels.greedy_assignment(weight, query_objects, stored_objects, n_query, n_stored)
@@ -215,16 +242,19 @@ def match_keyframes(
     query_side, stored_side = match_side(query, config), match_side(stored, config)
     query, stored = query_side.keyframe, stored_side.keyframe
     candidates = candidate_assignments(query_side, stored_side, config)
-    affinity = affinity_matrix(query_side, stored_side, candidates, e_max, config)
+    affinity = _sparse_affinity(query_side, stored_side, candidates, e_max, config)
     needed = _required_matches(query, stored, config)
-    chosen = spectral_matching(affinity, candidates, config)
-    score = kernels.group_sum(affinity, chosen) / e_max
-    kept = _supported(affinity, chosen, config.min_support)
+    chosen = _spectral(affinity, candidates, config)
+    # M among the chosen assignments, all that the score and the support test read
+    among = kernels.block(*affinity, chosen)
+    score = kernels.group_sum(among, np.arange(len(chosen))) / e_max
+    supported = _supported(among, np.arange(len(chosen)), config.min_support)  # positions in chosen
+    kept = chosen[supported]
     pairs = candidates[kept]
     if len(kept) < needed or score <= config.score_threshold:
         return _unverified(query, stored, score, pairs)
     fit, inliers = trimmed_fit(query, stored, pairs, config, needed)
-    kept, pairs = kept[inliers], pairs[inliers]
+    supported, pairs = supported[inliers], pairs[inliers]
     if fit is None or len(pairs) < needed:
         return _unverified(query, stored, score, pairs)
     residual_rms = float(np.sqrt(np.mean(fit.distances**2)))
@@ -236,7 +266,7 @@ def match_keyframes(
         and np.count_nonzero(in_view) <= config.max_contradictions
         and (config.tolerances == "fixed" or evidence >= config.min_evidence_bits + np.log2(max(tested, 1)))
     )
-    verified_score = kernels.group_sum(affinity, kept) / e_max if verified else 0.0
+    verified_score = kernels.group_sum(among, supported) / e_max if verified else 0.0
     return KeyframeMatch(
         query.id, stored.id, score, pairs, fit.transform, residual_rms, verified, verified_score, evidence, bits, spent,
         against, against_labels, in_view,

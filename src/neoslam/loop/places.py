@@ -58,24 +58,18 @@ def merge_keyframes(keyframes: list[Keyframe], anchor: Keyframe, association_rad
     labels = [label for k in keyframes for label in k.labels]
     covariances = np.concatenate([k.covariances for k in keyframes])
     patches = np.concatenate([k.patches for k in keyframes])
-    provisional = np.concatenate([k.provisional for k in keyframes]).tolist()
+    provisional = np.concatenate([k.provisional for k in keyframes])
     order = np.argsort(np.trace(covariances, axis1=1, axis2=2), kind="stable")  # the best-known first
-    (codes,) = kernels.label_codes(labels)
-    joined = kernels.merged_objects(kernels.plane(centers), codes, order, association_radius).tolist()
-    kept = [i for i in order.tolist() if joined[i] < 0]
-    known = [not p for p in provisional]
-    for i, j in enumerate(joined):
-        if j >= 0:
-            known[j] = known[j] or not provisional[i]
-    keep = np.array(kept, dtype=int)
+    codes = np.concatenate(kernels.label_codes(*(k.labels for k in keyframes)))
+    keep, provisional = kernels.kept_objects(kernels.plane(centers), codes, order, association_radius, provisional)
     return Keyframe(
         id=anchor.id,
         frame_index=anchor.frame_index,
         pose=anchor.pose,
         centers=centers[keep],
-        labels=tuple(labels[i] for i in kept),
+        labels=tuple(labels[i] for i in keep.tolist()),
         patches=patches[keep],
-        provisional=np.array([not known[i] for i in kept], dtype=bool),
+        provisional=provisional,
         covariances=covariances[keep],
         views=np.concatenate([k.views for k in keyframes]),
     )

@@ -13,12 +13,10 @@ vectorised searches whatever the map's size.
 
 from __future__ import annotations
 
-from functools import lru_cache
-from itertools import combinations
-
 import numpy as np
 
 from neoslam.config.loop import TRIANGLE_SIDE_BITS
+from neoslam.loop import kernels
 from neoslam.types import Keyframe
 
 __all__ = ["TriangleIndex", "triangle_keys"]
@@ -28,73 +26,20 @@ SIDE_BITS = TRIANGLE_SIDE_BITS  # up to 255 bins a side (matching.triangle_max_s
 MERGE_SHARE = 0.25  # the tail is merged into the main keys once it holds this share of them
 MIN_TAIL = 4096  # or, while the index is small, this many keys
 MAX_TAIL = 32768  # and at most this many: an add copies the tail (a merge costs a sort of all keys, < 1 ms per add)
-_NEIGHBOUR_CHOICES = ((np.arange(8)[:, None] >> np.arange(3)) & 1).astype(bool)  # (8, 3): which sides move a bin
-
-
-def _pack(labels: np.ndarray, bins: np.ndarray) -> np.ndarray:
-    """One int64 key per row of (t, 3) label codes and (t, 3) side bins."""
-    key = np.zeros(len(labels), dtype=np.int64)
-    for column in range(3):
-        key = (key << LABEL_BITS) | labels[:, column].astype(np.int64)
-    for column in range(3):
-        key = (key << SIDE_BITS) | bins[:, column].astype(np.int64)
-    return key
-
-
-@lru_cache(maxsize=64)
-def _triples(n: int) -> np.ndarray:
-    """(C(n, 3), 3) every three of n indices, in the order of itertools.combinations."""
-    return np.array(list(combinations(range(n), 3)), dtype=np.int64).reshape(-1, 3)
-
-
-def _triangles(
-    keyframe: Keyframe, codes: np.ndarray, max_objects: int, max_side: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """(t, 3) label codes and (t, 3) sides (m) of the keyframe's triangles, each ordered by its sides, shortest
-    first, each label that of the vertex opposite its side."""
-    centres = keyframe.centers[:, :2]
-    if len(centres) < 3:
-        return np.zeros((0, 3), dtype=np.int64), np.zeros((0, 3))
-    current = np.argmin(np.linalg.norm(centres - keyframe.pose[:2, 3], axis=1))
-    nearest = np.argsort(np.linalg.norm(centres - centres[current], axis=1), kind="stable")[:max_objects]
-    triples = nearest[_triples(len(nearest))]
-    points = centres[triples]  # (t, 3, 2)
-    sides = np.linalg.norm(points[:, [1, 2, 0]] - points[:, [2, 0, 1]], axis=2)  # side opposite each vertex
-    order = np.argsort(sides, axis=1, kind="stable")
-    sides = np.take_along_axis(sides, order, axis=1)
-    labels = np.take_along_axis(codes[triples], order, axis=1)
-    keep = sides[:, 2] <= max_side
-    return labels[keep], sides[keep]
 
 
 def triangle_keys(
     keyframe: Keyframe, codes: np.ndarray, side_bin: float, max_objects: int, max_side: float, spread: bool
 ) -> np.ndarray:
-    """The unique keys of a keyframe's triangles (`codes`: a label code per object); `spread`: each side also under
-    its nearer neighbouring bin (a query's keys), else its own bin only (a stored keyframe's)."""
-    labels, sides = _triangles(keyframe, codes, max_objects, max_side)
-    scaled = sides / side_bin
-    bins = np.floor(scaled).astype(np.int64)
-    if not spread:  # matching.triangle_max_side keeps every side within SIDE_BITS
-        return np.unique(_pack(labels, bins))
-    neighbour = np.where(scaled - bins >= 0.5, bins + 1, bins - 1)
-    # each side in its own bin or its nearer neighbour: the 8 choices at once, (8, t, 3)
-    chosen = np.where(_NEIGHBOUR_CHOICES[:, None, :], neighbour[None], bins[None]).reshape(-1, 3)
-    labels = np.broadcast_to(labels[None], (8, *labels.shape)).reshape(-1, 3)
-    valid = (chosen >= 0).all(axis=1) & (chosen < 2**SIDE_BITS).all(axis=1)
-    return np.unique(_pack(labels[valid], chosen[valid]))
-
-
-def _runs(sorted_keys: np.ndarray, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Where each key's run of equal keys starts in `sorted_keys`, and its length (0: not there)."""
-    low = np.searchsorted(sorted_keys, keys, side="left")
-    return low, np.searchsorted(sorted_keys, keys, side="right") - low
-
-
-def _postings(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """Indices of every run [start, start + count), laid end to end."""
-    offsets = np.repeat(starts - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts)
-    return offsets + np.arange(counts.sum())
+    """The unique keys (sorted) of a keyframe's triangles (every three of its `max_objects` objects nearest its
+    current object, ground plane, the longest side at most `max_side`) hashed by their label codes (`codes`: one per
+    object) and their sides in `side_bin` bins, each ordered by its sides, shortest first, each label that of the
+    vertex opposite its side; `spread`: each side also under its nearer neighbouring bin (a query's keys), else its
+    own bin only (a stored keyframe's)."""
+    return kernels.triangle_keys(
+        kernels.plane(keyframe.centers), kernels.plane(keyframe.pose[None, :3, 3])[0],
+        np.asarray(codes, dtype=np.int64), max_objects, max_side, side_bin, spread, LABEL_BITS, SIDE_BITS,
+    )  # fmt: skip
 
 
 class TriangleIndex:
@@ -153,15 +98,6 @@ class TriangleIndex:
             return np.zeros(0), np.zeros(0)
         codes = self._label_codes(query.labels, add=False)
         keys = triangle_keys(query, codes, self.side_bin, self.max_objects, self.max_side, spread=True)
-        low, count = _runs(self._keys, keys)
-        tail_low, tail_count = _runs(self._tail_keys, keys)
-        found = count + tail_count > 0
-        idf = np.log((stored + 1.0) / ((count + tail_count)[found] + 0.5))
-        count, tail_count = count[found], tail_count[found]
-        slots = np.concatenate(
-            [self._slots[_postings(low[found], count)], self._tail_slots[_postings(tail_low[found], tail_count)]]
+        return kernels.triangle_scores(
+            self._keys, self._slots, self._tail_keys, self._tail_slots, keys, self._key_counts[:stored]
         )
-        weights = np.concatenate([np.repeat(idf, count), np.repeat(idf, tail_count)])
-        shared = np.bincount(slots, minlength=stored).astype(float)
-        scores = np.bincount(slots, weights=weights, minlength=stored)
-        return scores / np.sqrt(np.maximum(self._key_counts[:stored], 1.0)), shared

@@ -191,13 +191,6 @@ def _counterpart_tolerances(config: MatchingConfig) -> tuple[float, float, float
     )  # fmt: skip
 
 
-def _inside(points: np.ndarray, known: np.ndarray, ground: tuple[float, float, float], margin: float) -> np.ndarray:
-    """Bool per (n, 2) point: known and at least `margin` inside the ground (x, y, radius) of the other keyframe."""
-    x, y, radius = ground
-    dx, dy = points[:, 0] - x, points[:, 1] - y
-    return known & (np.sqrt(dx * dx + dy * dy) <= radius - margin)
-
-
 def _turned(covariances: np.ndarray, transform: np.ndarray) -> np.ndarray:
     rotation = transform[:2, :2]
     return rotation @ covariances @ rotation.T
@@ -219,27 +212,22 @@ def contradicted_objects(
     moved = kernels.plane(transform_points(transform, query.centers))
     moved_cov = np.ascontiguousarray(_turned(query.covariances, transform))
     stored_points = kernels.plane(stored.centers)
-    query_ground = kernels.ground(moved, kernels.plane((transform @ query.pose)[None, :3, 3])[0])
-    stored_ground = kernels.ground(stored_points, kernels.plane(stored.pose[None, :3, 3])[0])
     query_codes, stored_codes = kernels.label_codes(query.labels, stored.labels)
-    tolerances = _counterpart_tolerances(config)
-    query_missed = _inside(moved, ~query.provisional, stored_ground, config.contradiction_margin)
-    query_missed[query_missed] = ~kernels.counterparts(
-        moved[query_missed], query_codes[query_missed], moved_cov[query_missed], stored_points, stored_codes,
-        stored.covariances, *tolerances,
-    )  # fmt: skip
-    stored_missed = _inside(stored_points, ~stored.provisional, query_ground, config.contradiction_margin)
-    stored_missed[stored_missed] = ~kernels.counterparts(
-        stored_points[stored_missed], stored_codes[stored_missed], stored.covariances[stored_missed], moved,
-        query_codes, moved_cov, *tolerances,
+    query_robot, stored_robot = (transform @ query.pose)[:2, 3].copy(), stored.pose[:2, 3].copy()
+    query_missed, stored_missed = kernels.missed_objects(
+        moved, query_codes, moved_cov, ~query.provisional, query_robot, stored_points, stored_codes, stored.covariances,
+        ~stored.provisional, stored_robot, config.contradiction_margin, *_counterpart_tolerances(config),
     )  # fmt: skip
     names = [label for label, out in zip(query.labels, query_missed.tolist(), strict=True) if out]
     names += [label for label, out in zip(stored.labels, stored_missed.tolist(), strict=True) if out]
+    points = np.concatenate([moved[query_missed], stored_points[stored_missed]])
+    if not names:
+        return points, (), np.zeros(0, dtype=bool)
     seen = [
         in_view(moved[query_missed], stored.views, config.contradiction_view_deg),
         in_view(stored_points[stored_missed], moved_views(query.views, transform), config.contradiction_view_deg),
     ]
-    return np.concatenate([moved[query_missed], stored_points[stored_missed]]), tuple(names), np.concatenate(seen)
+    return points, tuple(names), np.concatenate(seen)
 
 
 def pair_evidence(

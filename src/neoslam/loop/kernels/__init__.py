@@ -10,25 +10,36 @@ setup` compiles them (`python -m neoslam.loop.kernels`).
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from neoslam.loop.kernels.assignment import (
     affinity,
+    block,
+    compressed,
     distance_variances,
     greedy_assignment,
     group_sum,
+    kept_objects,
     merged_objects,
     principal_eigenvector,
+    sparse_affinity,
     supported,
 )
-from neoslam.loop.kernels.contradiction import counterparts, ground, in_view
+from neoslam.loop.kernels.contradiction import counterparts, ground, in_view, missed_objects
 from neoslam.loop.kernels.fit import fit_pairs, pair_bits, pair_columns, pair_covariances, trimmed
+from neoslam.loop.kernels.retrieval import triangle_keys, triangle_scores
 
 __all__ = [
-    "affinity", "distance_variances", "greedy_assignment", "group_sum", "merged_objects", "principal_eigenvector",
-    "supported", "counterparts", "ground", "in_view", "fit_pairs", "pair_bits", "pair_columns",
-    "pair_covariances", "trimmed", "plane", "label_codes", "compile_all",
+    "affinity", "block", "compressed", "sparse_affinity", "distance_variances", "greedy_assignment", "group_sum",
+    "kept_objects", "merged_objects", "principal_eigenvector", "supported", "counterparts", "ground", "in_view",
+    "missed_objects", "fit_pairs", "pair_bits", "pair_columns", "pair_covariances", "trimmed", "triangle_keys",
+    "triangle_scores", "plane", "label_codes", "compile_all",
 ]  # fmt: skip
+
+
+LABEL_CODES_CACHED = 4096  # label tuples (a keyframe's, a place's, a query's) whose codes are kept
 
 
 def plane(points: np.ndarray, columns: int = 2) -> np.ndarray:
@@ -37,12 +48,18 @@ def plane(points: np.ndarray, columns: int = 2) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(points, dtype=float)[:, :columns])
 
 
+_CODES: dict[str, int] = {}  # every label coded so far: a code stands for one label in every call
+
+
+@lru_cache(maxsize=LABEL_CODES_CACHED)
+def _codes_of(labels: tuple[str, ...]) -> np.ndarray:
+    return np.array([_CODES.setdefault(label, len(_CODES)) for label in labels], dtype=np.int64)
+
+
 def label_codes(*sequences) -> tuple[np.ndarray, ...]:
-    """Integer codes (int64) of label sequences, equal across them where the labels are."""
-    codes: dict[str, int] = {}
-    return tuple(
-        np.array([codes.setdefault(label, len(codes)) for label in labels], dtype=np.int64) for labels in sequences
-    )
+    """Integer codes (int64) of label sequences, equal wherever the labels are; the labels of a keyframe (a tuple)
+    are coded once and their codes kept, shared by every caller: not to be written to."""
+    return tuple(_codes_of(tuple(labels)) for labels in sequences)
 
 
 def compile_all() -> None:
@@ -55,9 +72,11 @@ def compile_all() -> None:
     distances = np.sqrt(((ground_points[:, None] - ground_points[None]) ** 2).sum(axis=2))
     variances = distance_variances(ground_points, covariances, 0.1)
     matrix = affinity(distances, distances, variances, variances, objects, objects, 1.5, 2.5, True)
-    weight = principal_eigenvector(matrix, 50, 1e-5)
-    chosen = supported(matrix, greedy_assignment(weight, objects, objects, 3, 3), 1)
-    group_sum(matrix, chosen)
+    sparse = sparse_affinity(distances, distances, variances, variances, objects, objects, 1.5, 2.5, True)
+    weight = principal_eigenvector(*compressed(matrix), 50, 1e-5)
+    chosen = greedy_assignment(weight, objects, objects, 3, 3)
+    among = block(*sparse, chosen)
+    group_sum(among, supported(among, np.arange(len(chosen)), 1))
     columns = pair_columns(centres, centres, covariances, covariances, 0.1)
     fit_pairs(columns, 2)
     found, yaw, *_, d2, _distances, _inliers = trimmed(columns, 2, 2.0, 9.2, 4.0, False)
@@ -65,5 +84,14 @@ def compile_all() -> None:
     pair_bits(covariances, covariances, yaw, 0.1, d2, np.ones(3), 150.0)
     counterparts(ground_points, objects, covariances, ground_points, objects, covariances, 2.5, 9.2, 0.1, True)
     ground(ground_points, np.zeros(2))
+    known = np.ones(3, dtype=np.bool_)
+    missed_objects(
+        ground_points, objects, covariances, known, np.zeros(2), ground_points, objects, covariances, known,
+        np.zeros(2), 1.0, 2.5, 9.2, 0.1, True,
+    )  # fmt: skip
     in_view(ground_points, np.zeros((1, 3)), 0.5)
-    merged_objects(ground_points, objects, objects, 2.5)
+    kept_objects(ground_points, objects, objects, 2.5, np.zeros(3, dtype=np.bool_))
+    for spread in (False, True):
+        keys = triangle_keys(ground_points, np.zeros(2), objects, 12, 40.0, 1.0, spread, 6, 8)
+    slots = np.zeros(len(keys), dtype=np.int32)
+    triangle_scores(keys, slots, keys, slots, keys, np.ones(1))

@@ -10,6 +10,9 @@ from numba import njit
 __all__ = [
     "distance_variances",
     "affinity",
+    "sparse_affinity",
+    "compressed",
+    "block",
     "principal_eigenvector",
     "greedy_assignment",
     "supported",
@@ -39,6 +42,34 @@ def distance_variances(centres: np.ndarray, covariances: np.ndarray, floor: floa
 
 
 @njit(cache=True)
+def _entry(
+    query_distances: np.ndarray,
+    stored_distances: np.ndarray,
+    query_variances: np.ndarray,
+    stored_variances: np.ndarray,
+    i: int,
+    j: int,
+    p: int,
+    q: int,
+    e_max: float,
+    sigmas: float,
+    covariance: bool,
+) -> float:
+    """M's entry for the assignments (i, p) and (j, q) (see affinity)."""
+    if i == j or p == q:
+        return 0.0  # one object cannot match two
+    difference = abs(query_distances[i, j] - stored_distances[p, q])
+    if not covariance:
+        return max(e_max - difference, 0.0)
+    if difference >= e_max:  # most pairs: 0 unless the covariances widen the tolerance past it
+        variance = query_variances[i, j] + stored_variances[p, q]
+        if difference * difference >= variance * (sigmas * sigmas):
+            return 0.0
+    tolerance = max(math.sqrt(query_variances[i, j] + stored_variances[p, q]) * sigmas, e_max)
+    return max(1.0 - difference / tolerance, 0.0) * e_max
+
+
+@njit(cache=True)
 def affinity(
     query_distances: np.ndarray,
     stored_distances: np.ndarray,
@@ -56,32 +87,63 @@ def affinity(
     that share an object."""
     c = len(query_objects)
     out = np.zeros((c, c))
-    sigmas_squared = sigmas * sigmas
     for a in range(c):
-        i, p = query_objects[a], stored_objects[a]
         for b in range(a + 1, c):  # M is symmetric
-            j, q = query_objects[b], stored_objects[b]
-            if i == j or p == q:
-                continue  # one object cannot match two
-            difference = abs(query_distances[i, j] - stored_distances[p, q])
-            if covariance:
-                if difference >= e_max:  # most pairs: 0 unless the covariances widen the tolerance past it
-                    variance = query_variances[i, j] + stored_variances[p, q]
-                    if difference * difference >= variance * sigmas_squared:
-                        continue
-                tolerance = max(math.sqrt(query_variances[i, j] + stored_variances[p, q]) * sigmas, e_max)
-                value = max(1.0 - difference / tolerance, 0.0) * e_max
-            else:
-                value = max(e_max - difference, 0.0)
+            value = _entry(
+                query_distances, stored_distances, query_variances, stored_variances, query_objects[a],
+                query_objects[b], stored_objects[a], stored_objects[b], e_max, sigmas, covariance,
+            )  # fmt: skip
             out[a, b] = value
             out[b, a] = value
     return out
 
 
 @njit(cache=True)
-def principal_eigenvector(matrix: np.ndarray, iterations: int, tolerance: float) -> np.ndarray:
-    """Power iteration on M + I from the uniform unit vector (see loop.matching.principal_eigenvector), over M's
+def sparse_affinity(
+    query_distances: np.ndarray,
+    stored_distances: np.ndarray,
+    query_variances: np.ndarray,
+    stored_variances: np.ndarray,
+    query_objects: np.ndarray,
+    stored_objects: np.ndarray,
+    e_max: float,
+    sigmas: float,
+    covariance: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """M of `affinity` as compressed rows (starts (c + 1,), columns, values; each row's columns increasing), its
     non-zero entries only: an affinity keeps a few per cent of them."""
+    c = len(query_objects)
+    upper = c * (c - 1) // 2
+    rows, columns, values = np.empty(upper, dtype=np.int64), np.empty(upper, dtype=np.int64), np.empty(upper)
+    counts = np.zeros(c + 1, dtype=np.int64)
+    found = 0
+    for a in range(c):
+        for b in range(a + 1, c):
+            value = _entry(
+                query_distances, stored_distances, query_variances, stored_variances, query_objects[a],
+                query_objects[b], stored_objects[a], stored_objects[b], e_max, sigmas, covariance,
+            )  # fmt: skip
+            if value != 0.0:
+                rows[found], columns[found], values[found] = a, b, value
+                counts[a + 1] += 1
+                counts[b + 1] += 1
+                found += 1
+    starts = np.cumsum(counts)
+    filled = starts[:-1].copy()
+    out_columns, out_values = np.empty(2 * found, dtype=np.int64), np.empty(2 * found)
+    # in the order found, row r receives its columns below r (as the second of a pair) before those above it
+    for k in range(found):
+        a, b = rows[k], columns[k]
+        out_columns[filled[a]], out_values[filled[a]] = b, values[k]
+        filled[a] += 1
+        out_columns[filled[b]], out_values[filled[b]] = a, values[k]
+        filled[b] += 1
+    return starts, out_columns, out_values
+
+
+@njit(cache=True)
+def compressed(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A dense matrix as compressed rows (starts, columns, values) of its non-zero entries."""
     n = matrix.shape[0]
     starts = np.zeros(n + 1, dtype=np.int64)
     columns = np.empty(n * n, dtype=np.int64)
@@ -93,7 +155,31 @@ def principal_eigenvector(matrix: np.ndarray, iterations: int, tolerance: float)
                 columns[count], values[count] = j, matrix[i, j]
                 count += 1
         starts[i + 1] = count
-    if count == 0:  # no pair of assignments agrees: nothing to rank
+    return starts, columns[:count], values[:count]
+
+
+@njit(cache=True)
+def block(starts: np.ndarray, columns: np.ndarray, values: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """The dense (k, k) block of a compressed matrix at rows and columns `indices`."""
+    k = len(indices)
+    out = np.zeros((k, k))
+    for x in range(k):
+        row = columns[starts[indices[x]] : starts[indices[x] + 1]]
+        for y in range(k):
+            at = np.searchsorted(row, indices[y])
+            if at < len(row) and row[at] == indices[y]:
+                out[x, y] = values[starts[indices[x]] + at]
+    return out
+
+
+@njit(cache=True)
+def principal_eigenvector(
+    starts: np.ndarray, columns: np.ndarray, values: np.ndarray, iterations: int, tolerance: float
+) -> np.ndarray:
+    """Power iteration on M + I (M as compressed rows) from the uniform unit vector (see
+    loop.matching.principal_eigenvector)."""
+    n = len(starts) - 1
+    if len(values) == 0:  # no pair of assignments agrees: nothing to rank
         return np.zeros(n)
     vector = np.full(n, 1.0 / math.sqrt(n))
     product = np.empty(n)
@@ -195,3 +281,18 @@ def merged_objects(centres: np.ndarray, codes: np.ndarray, order: np.ndarray, ra
         else:
             standing[i] = True
     return joined
+
+
+@njit(cache=True)
+def kept_objects(
+    centres: np.ndarray, codes: np.ndarray, order: np.ndarray, radius: float, provisional: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The objects kept by merged_objects, in `order`, and whether each is provisional: only when it and every object
+    that joined it are."""
+    joined = merged_objects(centres, codes, order, radius)
+    known = ~provisional
+    for i in range(len(joined)):
+        if joined[i] >= 0 and not provisional[i]:
+            known[joined[i]] = True
+    keep = np.array([i for i in order if joined[i] < 0], dtype=np.int64)
+    return keep, ~known[keep]

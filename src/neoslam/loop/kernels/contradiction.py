@@ -7,7 +7,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["counterparts", "ground", "in_view"]
+__all__ = ["counterparts", "ground", "in_view", "missed_objects"]
 
 
 @njit(cache=True)
@@ -72,3 +72,68 @@ def in_view(points: np.ndarray, views: np.ndarray, half_angle: float) -> np.ndar
                 seen[i] = True
                 break
     return seen
+
+
+@njit(cache=True)
+def _missed(
+    points: np.ndarray,
+    codes: np.ndarray,
+    covariances: np.ndarray,
+    known: np.ndarray,
+    other_ground: tuple[float, float, float],
+    others: np.ndarray,
+    other_codes: np.ndarray,
+    other_covariances: np.ndarray,
+    margin: float,
+    radius: float,
+    gate: float,
+    floor: float,
+    covariance: bool,
+) -> np.ndarray:
+    x, y, reach = other_ground
+    inside = np.zeros(len(points), dtype=np.bool_)
+    for i in range(len(points)):
+        dx, dy = points[i, 0] - x, points[i, 1] - y
+        inside[i] = known[i] and math.sqrt(dx * dx + dy * dy) <= reach - margin
+    chosen = np.flatnonzero(inside)
+    found = counterparts(
+        points[chosen], codes[chosen], covariances[chosen], others, other_codes, other_covariances, radius, gate,
+        floor, covariance,
+    )  # fmt: skip
+    for k in range(len(chosen)):
+        inside[chosen[k]] = not found[k]
+    return inside
+
+
+@njit(cache=True)
+def missed_objects(
+    points: np.ndarray,
+    codes: np.ndarray,
+    covariances: np.ndarray,
+    known: np.ndarray,
+    robot: np.ndarray,
+    others: np.ndarray,
+    other_codes: np.ndarray,
+    other_covariances: np.ndarray,
+    other_known: np.ndarray,
+    other_robot: np.ndarray,
+    margin: float,
+    radius: float,
+    gate: float,
+    floor: float,
+    covariance: bool,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Bool per object of either side (ground x, y, one frame; covariances in it; label codes; `known`: known to be
+    static), made with its robot at `robot`: known, at least `margin` inside the other side's ground (`ground`) and
+    without a counterpart among the other side's objects (`counterparts`)."""
+    ground_here = ground(points, robot)
+    ground_there = ground(others, other_robot)
+    here = _missed(
+        points, codes, covariances, known, ground_there, others, other_codes, other_covariances, margin, radius, gate,
+        floor, covariance,
+    )  # fmt: skip
+    there = _missed(
+        others, other_codes, other_covariances, other_known, ground_here, points, codes, covariances, margin, radius,
+        gate, floor, covariance,
+    )  # fmt: skip
+    return here, there
