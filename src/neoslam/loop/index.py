@@ -19,6 +19,7 @@ from itertools import islice
 import numpy as np
 
 from neoslam.config import MatchingConfig
+from neoslam.loop import kernels
 from neoslam.loop.triangles import TriangleIndex
 from neoslam.types import Keyframe
 
@@ -102,6 +103,7 @@ class KeyframeIndex:
         self._odometer = np.zeros(INITIAL_CAPACITY)
         self._signatures = np.zeros((INITIAL_CAPACITY, LABEL_BINS + len(DISTANCE_BINS) - 1))
         self._label_counts: dict[str, int] = {}
+        self._label_shares: dict[str, float] | None = None
         self._triangles = TriangleIndex(config.triangle_side_bin, config.triangle_objects, config.triangle_max_side)
         # the last eligible ids and their slots: a query ranks the ids `eligible` gave it, and finding 10,000 slots
         # of 20,000 stored by search costs a third of a millisecond
@@ -128,11 +130,14 @@ class KeyframeIndex:
         self.keyframes.append(keyframe)
         for label in keyframe.labels:
             self._label_counts[label] = self._label_counts.get(label, 0) + 1
+        self._label_shares = None
 
     def label_shares(self) -> dict[str, float]:
         """Each label's share among the stored keyframes' objects (an object in several keyframes counts in each)."""
-        total = sum(self._label_counts.values())
-        return {label: count / total for label, count in self._label_counts.items()}
+        if self._label_shares is None:  # worked out once per keyframe stored: every match of a query asks for it
+            total = sum(self._label_counts.values())
+            self._label_shares = {label: count / total for label, count in self._label_counts.items()}
+        return self._label_shares
 
     def slot(self, keyframe_id: int) -> int:
         """Where keyframe `keyframe_id` stands in the order stored."""
@@ -150,11 +155,15 @@ class KeyframeIndex:
     def eligible(self, position: np.ndarray, odometer_m: float) -> np.ndarray:
         """Ids of stored keyframes that are old enough and within the drift-bounded search radius."""
         n = len(self.keyframes)
-        travelled = odometer_m - self._odometer[:n]
-        radius = self.config.search_radius + self.config.search_radius_per_metre * travelled
-        dx, dy = self._positions[:n, 0] - position[0], self._positions[:n, 1] - position[1]
-        near = dx * dx + dy * dy <= radius * radius  # squared: no root over every stored keyframe
-        slots = np.flatnonzero(near & (travelled >= self.config.exclude_recent_distance))
+        slots = kernels.within_reach(
+            self._positions[:n], self._odometer[:n], np.asarray(position[:2], dtype=float), float(odometer_m),
+            self.config.search_radius, self.config.search_radius_per_metre, self.config.exclude_recent_distance,
+        )  # fmt: skip
+        return self._eligible_ids(slots)
+
+    def _eligible_ids(self, slots: np.ndarray) -> np.ndarray:
+        """The ids of the eligible keyframes at `slots` (increasing), remembered with them for the ranking that
+        follows."""
         ids = self._ids[slots]
         ids.flags.writeable = False  # known by identity to _slots_of
         self._last_eligible = (ids, slots)

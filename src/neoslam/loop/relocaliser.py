@@ -41,7 +41,7 @@ class WholeMapIndex(KeyframeIndex):
     """Stored keyframes, every one a candidate wherever the query is."""
 
     def eligible(self, position: np.ndarray, odometer_m: float) -> np.ndarray:
-        return self._ids[: len(self.keyframes)].copy()
+        return self._eligible_ids(np.arange(len(self.keyframes)))
 
     def recent(self, keyframe_id: int, odometer_m: float) -> bool:
         return False  # a stored map's keyframes were made in another session

@@ -29,13 +29,13 @@ from neoslam.loop.kernels.assignment import (
 )
 from neoslam.loop.kernels.contradiction import counterparts, ground, in_view, missed_objects
 from neoslam.loop.kernels.fit import fit_pairs, pair_bits, pair_columns, pair_covariances, trimmed
-from neoslam.loop.kernels.retrieval import triangle_keys, triangle_scores
+from neoslam.loop.kernels.retrieval import triangle_keys, triangle_scores, within_reach
 
 __all__ = [
     "affinity", "block", "compressed", "sparse_affinity", "distance_variances", "greedy_assignment", "group_sum",
     "kept_objects", "merged_objects", "principal_eigenvector", "supported", "counterparts", "ground", "in_view",
     "missed_objects", "fit_pairs", "pair_bits", "pair_columns", "pair_covariances", "trimmed", "triangle_keys",
-    "triangle_scores", "plane", "label_codes", "compile_all",
+    "triangle_scores", "within_reach", "plane", "label_codes", "compile_all",
 ]  # fmt: skip
 
 
@@ -95,3 +95,4 @@ def compile_all() -> None:
         keys = triangle_keys(ground_points, np.zeros(2), objects, 12, 40.0, 1.0, spread, 6, 8)
     slots = np.zeros(len(keys), dtype=np.int32)
     triangle_scores(keys, slots, keys, slots, keys, np.ones(1))
+    within_reach(ground_points, np.zeros(3), np.zeros(2), 1.0, 1.0, 0.1, 0.5)

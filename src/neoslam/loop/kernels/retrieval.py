@@ -12,6 +12,20 @@ __all__ = ["triangle_scores"]
 
 
 @njit(cache=True)
+def _runs(sorted_keys: np.ndarray, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where each key's run of equal keys starts in `sorted_keys`, and its length (0: not there): its end found by
+    walking the run, which is read next anyway, rather than by a second search through the whole array."""
+    low = np.searchsorted(sorted_keys, keys)
+    count = np.zeros(len(keys), dtype=np.int64)
+    for k in range(len(keys)):
+        end = low[k]
+        while end < len(sorted_keys) and sorted_keys[end] == keys[k]:
+            end += 1
+        count[k] = end - low[k]
+    return low, count
+
+
+@njit(cache=True)
 def _add_postings(
     slots: np.ndarray,
     query_keys: np.ndarray,
@@ -43,10 +57,8 @@ def triangle_scores(
     root of its number of keys; and the number of query keys it holds. `keys` and `tail_keys` are sorted, each with
     the slot of its keyframe; a keyframe's keys are all in one of them."""
     stored = len(key_counts)
-    low = np.searchsorted(keys, query_keys, side="left")
-    count = np.searchsorted(keys, query_keys, side="right") - low
-    tail_low = np.searchsorted(tail_keys, query_keys, side="left")
-    tail_count = np.searchsorted(tail_keys, query_keys, side="right") - tail_low
+    low, count = _runs(keys, query_keys)
+    tail_low, tail_count = _runs(tail_keys, query_keys)
     idf = np.empty(len(query_keys))
     for k in range(len(query_keys)):
         idf[k] = math.log((stored + 1.0) / (count[k] + tail_count[k] + 0.5))
@@ -136,3 +148,28 @@ def triangle_keys(
                         keys[count] = key
                         count += 1
     return np.unique(keys[:count])
+
+
+@njit(cache=True)
+def within_reach(
+    positions: np.ndarray,
+    odometer: np.ndarray,
+    position: np.ndarray,
+    odometer_now: float,
+    radius: float,
+    radius_per_metre: float,
+    exclude_recent: float,
+) -> np.ndarray:
+    """Slots (increasing) of the stored keyframes (ground positions (n, 2), odometer readings (n,)) made at least
+    `exclude_recent` metres of travel ago and within `radius` plus `radius_per_metre` of the metres travelled since
+    of `position` (compared squared: no root over every stored keyframe)."""
+    found = np.empty(len(odometer), dtype=np.int64)
+    count = 0
+    for slot in range(len(odometer)):
+        travelled = odometer_now - odometer[slot]
+        reach = radius + radius_per_metre * travelled
+        dx, dy = positions[slot, 0] - position[0], positions[slot, 1] - position[1]
+        if dx * dx + dy * dy <= reach * reach and travelled >= exclude_recent:
+            found[count] = slot
+            count += 1
+    return found[:count]
