@@ -14,7 +14,9 @@
     laying the keyframes of the drives of (a), each in a world of its own, far apart (and again from the first when
     all are laid); revisits and new places apart; within the drift-bounded search radius and over the whole map
     (every stored keyframe a candidate: a later session, a lost robot); the retrieval index's memory; and at the
-    largest map also with the exact eigenvector (power iteration run to 1e-9, at most 100 products).
+    largest map also with the exact eigenvector (power iteration run to 1e-9, at most 100 products). The rows'
+    queries are timed in turn, one of each row after another, so that the rows compare within one run
+    (benchmarks._loop_speed).
 
     python -m benchmarks.loops [--quick] [--seeds N ...] [--sequences 08 town ...] [--profile vo|heavy]
                                [--config FILE.yaml] [--out FILE] [--sweep-dir DIR] [--workers N] [--ray ADDRESS]
@@ -34,7 +36,6 @@ import pickle
 import statistics
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +43,7 @@ import numpy as np
 from benchmarks import harness
 from benchmarks._loop_misses import CLASSES as MISS_CLASSES
 from benchmarks._loop_misses import replay
+from benchmarks._loop_speed import MAP_SIZES, QUERIES, QUICK_MAP_SIZES, query_speed
 from benchmarks._sweep import SPECS, config_file, run_spec, sweep_options, with_changes
 from benchmarks.harness import data_root
 from neoslam.config import KeyframeConfig, MatchingConfig, NeoSLAMConfig, load_config
@@ -56,14 +58,8 @@ from neoslam.types import Keyframe, LoopClosure
 
 SEQUENCES = ["00", "02", "05", "06", "08"]
 SEEDS = [1, 2, 3, 4, 5, 6]
-MAP_SIZES = [100, 1000, 5000, 20000]
-QUICK_MAP_SIZES = [100, 1000, 5000]
-QUERIES = 200
-TILE_OFFSET_M = 1500.0  # the drives of the speed benchmark are laid this far apart
 SPEC = SPECS / "loops.yaml"  # overrides: ours, paper_keyframes (e_max = 1.5 m), without_last_checks
 VARIANTS = ("ours", "paper_keyframes", "without_last_checks")
-EXACT_EIGENVECTOR = {"power_iterations": 100, "power_tolerance": 1e-9}  # the power iteration run to convergence
-WHOLE_MAP_M = 1e7  # a search radius that takes every stored keyframe
 
 
 def _every_keyframe_stored(config: NeoSLAMConfig) -> NeoSLAMConfig:
@@ -177,83 +173,6 @@ def _accuracy_of(config: NeoSLAMConfig, data: Path) -> dict:
         "_keyframes": list(slam.loop_detector.index.keyframes),
         "_odometer": slam.keyframes.odometer_m,
     }
-
-
-def _tiled(drives: list[list[Keyframe]], size: int) -> list[tuple[Keyframe, float]]:
-    """`size` keyframes from the drives' keyframes, each drive (in turn, again from the first when all are laid)
-    shifted far from the others, with odometer readings as if driven one after another."""
-    spacing = 5.0
-    tiled: list[tuple[Keyframe, float]] = []
-    copy = 0
-    while len(tiled) < size:
-        shift = np.eye(4)
-        shift[:2, 3] = [TILE_OFFSET_M * (copy % 8), TILE_OFFSET_M * (copy // 8)]
-        for k in drives[copy % len(drives)][: size - len(tiled)]:
-            tiled.append((replace(k.moved(shift), id=len(tiled)), spacing * len(tiled)))
-        copy += 1
-    return tiled
-
-
-def _scrambled(keyframe: Keyframe, rng: np.random.Generator) -> Keyframe:
-    """The same objects at the same place, each moved a random 3-10 m: a layout that is nowhere in the map."""
-    angle = rng.uniform(0, 2 * np.pi, len(keyframe.labels))
-    radius = rng.uniform(3.0, 10.0, len(keyframe.labels))
-    moved = keyframe.centers + np.column_stack([radius * np.cos(angle), radius * np.sin(angle), 0 * angle])
-    return replace(keyframe, centers=moved)
-
-
-def _speed_row(
-    matching: MatchingConfig, stream: list[tuple[Keyframe, float]], size: int, queries: int, scope: str
-) -> dict:
-    """Median times of `queries` revisits and as many new places against the first `size` keyframes of the stream
-    (the same queries for the same size, whatever the matching setting); `scope` "drift-bounded" (the search radius
-    round the estimate) or "whole map" (every stored keyframe a candidate, as a later session or a lost robot
-    searches). Also the memory of the detector's retrieval index."""
-    config = load_config(environ={})
-    if scope == "whole map":
-        matching = matching.model_copy(update={"search_radius": WHOLE_MAP_M})
-    detector = LoopClosureDetector(config.keyframes, matching)
-    for keyframe, odometer in stream[:size]:
-        detector.add(keyframe, odometer)
-    odometer_now = stream[size - 1][1] + matching.exclude_recent_distance + 1.0
-    rng = np.random.default_rng(size)
-    times: dict[str, list[float]] = {"revisit": [], "new": []}
-    eligible = []
-    for index in rng.integers(0, size, queries):
-        keyframe = stream[int(index)][0]
-        # A revisit stops at the first verified candidate; a new place matches every candidate and fails.
-        for kind, query in (("revisit", keyframe), ("new", _scrambled(keyframe, rng))):
-            start = time.perf_counter()
-            detector.relocalise(query, odometer_now)
-            times[kind].append(time.perf_counter() - start)
-        eligible.append(len(detector.index.eligible(keyframe.pose[:3, 3], odometer_now)))
-    return {
-        "scope": scope,
-        "map_size": size,
-        "queries": queries,
-        "eligible_median": int(np.median(eligible)),
-        "revisit_ms_median": 1e3 * float(np.median(times["revisit"])),
-        "new_place_ms_median": 1e3 * float(np.median(times["new"])),
-        "query_ms_median": 1e3 * float(np.median(times["revisit"] + times["new"])),
-        "query_ms_p95": 1e3 * float(np.percentile(times["revisit"] + times["new"], 95)),
-        "index_mb": detector.index.nbytes / 1e6,
-        "keyframes_mb": sum(k.nbytes for k in detector.index.keyframes) / 1e6,
-        "places_mb": detector.places.nbytes / 1e6,
-    }
-
-
-def query_speed(drives: list[list[Keyframe]], sizes: list[int], queries: int) -> list[dict]:
-    """A row per map size and scope with the default matching, then one at the largest size with the exact
-    eigenvector; the map is laid from the drives' keyframes (benchmarks.loops (b))."""
-    matching = load_config(environ={}).matching
-    stream = _tiled(drives, max(sizes))
-    rows = [
-        {"eigenvector": "default", **_speed_row(matching, stream, size, queries, scope)}
-        for scope in ("drift-bounded", "whole map")
-        for size in sizes
-    ]
-    exact = matching.model_copy(update=EXACT_EIGENVECTOR)
-    return [*rows, {"eigenvector": "exact", **_speed_row(exact, stream, max(sizes), queries, "drift-bounded")}]
 
 
 def _paper_note(paper: list[dict], config: NeoSLAMConfig) -> str:
