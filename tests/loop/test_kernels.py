@@ -51,11 +51,16 @@ def test_the_affinity_is_eq_2_and_4_over_the_candidates(seed: int, covariance: b
     else:
         expected = np.maximum(e_max - difference, 0.0)
     expected[(q[:, None] == q[None, :]) | (s[:, None] == s[None, :])] = 0.0  # one object cannot match two
-    arguments = (_distances(query), _distances(stored), query_var, stored_var, q, s, e_max, sigmas, covariance)
-    found = kernels.affinity(*arguments)
+    starts, columns, values = kernels.affinity(
+        _distances(query), _distances(stored), query_var, stored_var, q, s, e_max, sigmas, covariance
+    )
+    found = np.zeros((len(q), len(q)))
+    for row in range(len(q)):
+        assert np.all(np.diff(columns[starts[row] : starts[row + 1]]) > 0)  # each row's columns increasing
+        found[row, columns[starts[row] : starts[row + 1]]] = values[starts[row] : starts[row + 1]]
+    assert np.all(values != 0.0)  # the non-zero entries only
     np.testing.assert_allclose(found, expected, rtol=1e-12, atol=1e-15)
-    # the compressed rows matching builds hold the same entries, bit for bit, each row's columns increasing
-    for built, dense in zip(kernels.sparse_affinity(*arguments), kernels.compressed(found), strict=True):
+    for built, dense in zip((starts, columns, values), kernels.compressed(found), strict=True):
         np.testing.assert_array_equal(built, dense)
 
 
@@ -170,9 +175,11 @@ def test_missed_objects_are_known_well_inside_the_other_ground_with_no_counterpa
     robot, other_robot = rng.uniform(-5, 5, 2), rng.uniform(-5, 5, 2)
     margin, radius, gate, floor = 2.0, 1.0, 9.21, 0.1
     found = kernels.missed_objects(
-        here, codes, here_cov, known, robot, there, other_codes, there_cov, other_known, other_robot, margin, radius,
-        gate, floor, True,
-    )  # fmt: skip
+        (here, codes, here_cov, known, robot),
+        (there, other_codes, there_cov, other_known, other_robot),
+        margin,
+        (radius, gate, floor, True),
+    )
 
     def missed(points, point_codes, covs, point_known, others, others_codes, others_covs, others_robot):
         centre, reach = _ground(others, others_robot)

@@ -153,7 +153,8 @@ class KeyframeIndex:
         return np.searchsorted(self._ids[: len(self.keyframes)], keyframe_ids)
 
     def eligible(self, position: np.ndarray, odometer_m: float) -> np.ndarray:
-        """Ids of stored keyframes that are old enough and within the drift-bounded search radius."""
+        """Ids (increasing, read-only) of stored keyframes that are old enough and within the drift-bounded search
+        radius."""
         n = len(self.keyframes)
         slots = kernels.within_reach(
             self._positions[:n], self._odometer[:n], np.asarray(position[:2], dtype=float), float(odometer_m),

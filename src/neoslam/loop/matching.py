@@ -144,25 +144,20 @@ def affinity_matrix(
     """M over the candidates (eq. 2, 4): e_max − |e_ij − e_i'j'| clipped at 0, or with `tolerances: covariance`
     e_max · (1 − |e_ij − e_i'j'| / tolerance) clipped at 0, the tolerance at least e_max and `affinity_sigmas`
     standard deviations of the difference; 0 for assignments in conflict. Without a config: the paper's form."""
-    return kernels.affinity(*_affinity_arguments(query, stored, candidates, e_max, config))
+    starts, columns, values = _sparse_affinity(query, stored, candidates, e_max, config)
+    dense = np.zeros((len(starts) - 1, len(starts) - 1))
+    dense[np.repeat(np.arange(len(starts) - 1), np.diff(starts)), columns] = values
+    return dense
 
 
 def _sparse_affinity(
-    query: MatchSide, stored: MatchSide, candidates: np.ndarray, e_max: float, config: MatchingConfig
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """affinity_matrix as compressed rows (starts, columns, values) of its non-zero entries, as matching uses it."""
-    return kernels.sparse_affinity(*_affinity_arguments(query, stored, candidates, e_max, config))
-
-
-def _affinity_arguments(
     query: Keyframe | MatchSide,
     stored: Keyframe | MatchSide,
     candidates: np.ndarray,
     e_max: float,
     config: MatchingConfig | None,
-) -> tuple:
-    """What the affinity kernels take: the two keyframes' distances and their variances (none without `tolerances:
-    covariance`), the candidates' objects, e_max, `affinity_sigmas` and whether the covariances count."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """affinity_matrix as compressed rows (starts, columns, values) of its non-zero entries, as matching uses it."""
     query_keyframe = query.keyframe if isinstance(query, MatchSide) else query
     stored_keyframe = stored.keyframe if isinstance(stored, MatchSide) else stored
     covariance = config is not None and config.tolerances != "fixed"
@@ -173,7 +168,7 @@ def _affinity_arguments(
         query_variances = stored_variances = np.zeros((0, 0))
         sigmas = 0.0
     query_objects, stored_objects = _objects(candidates)
-    return (
+    return kernels.affinity(
         query_keyframe.distances, stored_keyframe.distances, query_variances, stored_variances, query_objects,
         stored_objects, float(e_max), float(sigmas), covariance,
     )  # fmt: skip

@@ -215,8 +215,9 @@ def contradicted_objects(
     query_codes, stored_codes = kernels.label_codes(query.labels, stored.labels)
     query_robot, stored_robot = (transform @ query.pose)[:2, 3].copy(), stored.pose[:2, 3].copy()
     query_missed, stored_missed = kernels.missed_objects(
-        moved, query_codes, moved_cov, ~query.provisional, query_robot, stored_points, stored_codes, stored.covariances,
-        ~stored.provisional, stored_robot, config.contradiction_margin, *_counterpart_tolerances(config),
+        (moved, query_codes, moved_cov, ~query.provisional, query_robot),
+        (stored_points, stored_codes, stored.covariances, ~stored.provisional, stored_robot),
+        config.contradiction_margin, _counterpart_tolerances(config),
     )  # fmt: skip
     names = [label for label, out in zip(query.labels, query_missed.tolist(), strict=True) if out]
     names += [label for label, out in zip(stored.labels, stored_missed.tolist(), strict=True) if out]

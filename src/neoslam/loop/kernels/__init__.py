@@ -1,15 +1,18 @@
-"""The inner loops of place matching, compiled with numba.
+"""The inner loops of retrieval and place matching, compiled with numba.
 
 A place match runs over a few dozen to a few hundred candidate assignments and a few to a few dozen fitted pairs,
-where numpy's cost per call, not the arithmetic, is what a place took: written out as loops and compiled, each of
-these takes microseconds. They are pure functions of arrays with the same arithmetic as the formulas their callers
-document (loop.matching: the affinity, eq. 2 and 4, and spectral matching, eq. 5; loop.verification: the weighted
-fit and its trimming). Compiled once per machine and cached beside their source (numba's `cache=True`); `make
-setup` compiles them (`python -m neoslam.loop.kernels`).
+and a query's retrieval over a few hundred triangle keys and their tens of thousands of postings, where numpy's cost
+per call, not the arithmetic, is what they took: written out as loops and compiled, each of these takes
+microseconds. They are pure functions of arrays with the same arithmetic as the formulas their callers document
+(loop.index and loop.triangles: the eligible keyframes, triangle keys and scores; loop.matching: the affinity, eq. 2
+and 4, and spectral matching, eq. 5; loop.verification: the weighted fit, its trimming and the contradiction test;
+loop.places: a place's merged objects). Compiled once per machine and cached beside their source (numba's
+`cache=True`); `make setup` compiles them (`python -m neoslam.loop.kernels`).
 """
 
 from __future__ import annotations
 
+import threading
 from functools import lru_cache
 
 import numpy as np
@@ -24,7 +27,6 @@ from neoslam.loop.kernels.assignment import (
     kept_objects,
     merged_objects,
     principal_eigenvector,
-    sparse_affinity,
     supported,
 )
 from neoslam.loop.kernels.contradiction import counterparts, ground, in_view, missed_objects
@@ -32,7 +34,7 @@ from neoslam.loop.kernels.fit import fit_pairs, pair_bits, pair_columns, pair_co
 from neoslam.loop.kernels.retrieval import triangle_keys, triangle_scores, within_reach
 
 __all__ = [
-    "affinity", "block", "compressed", "sparse_affinity", "distance_variances", "greedy_assignment", "group_sum",
+    "affinity", "block", "compressed", "distance_variances", "greedy_assignment", "group_sum",
     "kept_objects", "merged_objects", "principal_eigenvector", "supported", "counterparts", "ground", "in_view",
     "missed_objects", "fit_pairs", "pair_bits", "pair_columns", "pair_covariances", "trimmed", "triangle_keys",
     "triangle_scores", "within_reach", "plane", "label_codes", "compile_all",
@@ -49,11 +51,13 @@ def plane(points: np.ndarray, columns: int = 2) -> np.ndarray:
 
 
 _CODES: dict[str, int] = {}  # every label coded so far: a code stands for one label in every call
+_CODING = threading.Lock()  # two threads coding new labels at once must not give them one code
 
 
 @lru_cache(maxsize=LABEL_CODES_CACHED)
 def _codes_of(labels: tuple[str, ...]) -> np.ndarray:
-    return np.array([_CODES.setdefault(label, len(_CODES)) for label in labels], dtype=np.int64)
+    with _CODING:
+        return np.array([_CODES.setdefault(label, len(_CODES)) for label in labels], dtype=np.int64)
 
 
 def label_codes(*sequences) -> tuple[np.ndarray, ...]:
@@ -71,9 +75,9 @@ def compile_all() -> None:
     objects = np.arange(3, dtype=np.int64)
     distances = np.sqrt(((ground_points[:, None] - ground_points[None]) ** 2).sum(axis=2))
     variances = distance_variances(ground_points, covariances, 0.1)
-    matrix = affinity(distances, distances, variances, variances, objects, objects, 1.5, 2.5, True)
-    sparse = sparse_affinity(distances, distances, variances, variances, objects, objects, 1.5, 2.5, True)
-    weight = principal_eigenvector(*compressed(matrix), 50, 1e-5)
+    sparse = affinity(distances, distances, variances, variances, objects, objects, 1.5, 2.5, True)
+    weight = principal_eigenvector(*sparse, 50, 1e-5)
+    principal_eigenvector(*compressed(np.eye(3)), 50, 1e-5)
     chosen = greedy_assignment(weight, objects, objects, 3, 3)
     among = block(*sparse, chosen)
     group_sum(among, supported(among, np.arange(len(chosen)), 1))
@@ -85,10 +89,8 @@ def compile_all() -> None:
     counterparts(ground_points, objects, covariances, ground_points, objects, covariances, 2.5, 9.2, 0.1, True)
     ground(ground_points, np.zeros(2))
     known = np.ones(3, dtype=np.bool_)
-    missed_objects(
-        ground_points, objects, covariances, known, np.zeros(2), ground_points, objects, covariances, known,
-        np.zeros(2), 1.0, 2.5, 9.2, 0.1, True,
-    )  # fmt: skip
+    side = (ground_points, objects, covariances, known, np.zeros(2))
+    missed_objects(side, side, 1.0, (2.5, 9.2, 0.1, True))
     in_view(ground_points, np.zeros((1, 3)), 0.5)
     kept_objects(ground_points, objects, objects, 2.5, np.zeros(3, dtype=np.bool_))
     for spread in (False, True):

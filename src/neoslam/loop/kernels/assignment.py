@@ -10,7 +10,6 @@ from numba import njit
 __all__ = [
     "distance_variances",
     "affinity",
-    "sparse_affinity",
     "compressed",
     "block",
     "principal_eigenvector",
@@ -80,38 +79,12 @@ def affinity(
     e_max: float,
     sigmas: float,
     covariance: bool,
-) -> np.ndarray:
-    """(c, c) M over the candidate assignments (query_objects[a], stored_objects[a]): e_max − |e_ij − e_i'j'|
-    clipped at 0, or with `covariance` e_max · (1 − |e_ij − e_i'j'| / tolerance) clipped at 0, the tolerance at least
-    e_max and `sigmas` standard deviations of the difference (the variances unused otherwise); 0 for two assignments
-    that share an object."""
-    c = len(query_objects)
-    out = np.zeros((c, c))
-    for a in range(c):
-        for b in range(a + 1, c):  # M is symmetric
-            value = _entry(
-                query_distances, stored_distances, query_variances, stored_variances, query_objects[a],
-                query_objects[b], stored_objects[a], stored_objects[b], e_max, sigmas, covariance,
-            )  # fmt: skip
-            out[a, b] = value
-            out[b, a] = value
-    return out
-
-
-@njit(cache=True)
-def sparse_affinity(
-    query_distances: np.ndarray,
-    stored_distances: np.ndarray,
-    query_variances: np.ndarray,
-    stored_variances: np.ndarray,
-    query_objects: np.ndarray,
-    stored_objects: np.ndarray,
-    e_max: float,
-    sigmas: float,
-    covariance: bool,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """M of `affinity` as compressed rows (starts (c + 1,), columns, values; each row's columns increasing), its
-    non-zero entries only: an affinity keeps a few per cent of them."""
+    """M over the candidate assignments (query_objects[a], stored_objects[a]) as compressed rows (starts (c + 1,),
+    columns, values; each row's columns increasing), its non-zero entries only (an affinity keeps a few per cent of
+    them): e_max − |e_ij − e_i'j'| clipped at 0, or with `covariance` e_max · (1 − |e_ij − e_i'j'| / tolerance)
+    clipped at 0, the tolerance at least e_max and `sigmas` standard deviations of the difference (the variances
+    unused otherwise); 0 for two assignments that share an object."""
     c = len(query_objects)
     upper = c * (c - 1) // 2
     rows, columns, values = np.empty(upper, dtype=np.int64), np.empty(upper, dtype=np.int64), np.empty(upper)

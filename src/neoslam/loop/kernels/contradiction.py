@@ -75,27 +75,16 @@ def in_view(points: np.ndarray, views: np.ndarray, half_angle: float) -> np.ndar
 
 
 @njit(cache=True)
-def _missed(
-    points: np.ndarray,
-    codes: np.ndarray,
-    covariances: np.ndarray,
-    known: np.ndarray,
-    other_ground: tuple[float, float, float],
-    others: np.ndarray,
-    other_codes: np.ndarray,
-    other_covariances: np.ndarray,
-    margin: float,
-    radius: float,
-    gate: float,
-    floor: float,
-    covariance: bool,
-) -> np.ndarray:
+def _missed(side: tuple, other: tuple, other_ground: tuple, margin: float, tolerances: tuple) -> np.ndarray:
+    points, codes, covariances, known, _ = side
+    others, other_codes, other_covariances, _, _ = other
     x, y, reach = other_ground
     inside = np.zeros(len(points), dtype=np.bool_)
     for i in range(len(points)):
         dx, dy = points[i, 0] - x, points[i, 1] - y
         inside[i] = known[i] and math.sqrt(dx * dx + dy * dy) <= reach - margin
     chosen = np.flatnonzero(inside)
+    radius, gate, floor, covariance = tolerances
     found = counterparts(
         points[chosen], codes[chosen], covariances[chosen], others, other_codes, other_covariances, radius, gate,
         floor, covariance,
@@ -106,34 +95,11 @@ def _missed(
 
 
 @njit(cache=True)
-def missed_objects(
-    points: np.ndarray,
-    codes: np.ndarray,
-    covariances: np.ndarray,
-    known: np.ndarray,
-    robot: np.ndarray,
-    others: np.ndarray,
-    other_codes: np.ndarray,
-    other_covariances: np.ndarray,
-    other_known: np.ndarray,
-    other_robot: np.ndarray,
-    margin: float,
-    radius: float,
-    gate: float,
-    floor: float,
-    covariance: bool,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Bool per object of either side (ground x, y, one frame; covariances in it; label codes; `known`: known to be
-    static), made with its robot at `robot`: known, at least `margin` inside the other side's ground (`ground`) and
-    without a counterpart among the other side's objects (`counterparts`)."""
-    ground_here = ground(points, robot)
-    ground_there = ground(others, other_robot)
-    here = _missed(
-        points, codes, covariances, known, ground_there, others, other_codes, other_covariances, margin, radius, gate,
-        floor, covariance,
-    )  # fmt: skip
-    there = _missed(
-        others, other_codes, other_covariances, other_known, ground_here, points, codes, covariances, margin, radius,
-        gate, floor, covariance,
-    )  # fmt: skip
+def missed_objects(side: tuple, other: tuple, margin: float, tolerances: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """Bool per object of either side, a side being (ground points (n, 2), label codes, ground covariances, known to
+    be static, robot position (2,)), both in one frame: known, at least `margin` inside the other side's ground
+    (`ground`, from the other's robot) and without a counterpart among the other side's objects (`counterparts`
+    with `tolerances`: radius, gate, floor, covariance)."""
+    here = _missed(side, other, ground(other[0], other[4]), margin, tolerances)
+    there = _missed(other, side, ground(side[0], side[4]), margin, tolerances)
     return here, there
