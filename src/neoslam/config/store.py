@@ -27,12 +27,11 @@ class MapStoreConfig(Section):
         "stored places, the best that matching.retrieval ranks over the whole map",
     )
     relocalisation_consecutive: int = Field(
-        2,
+        3,
         gt=0,
         le=100,
         description="a session joins the stored map only when this many consecutive keyframes relocalise in it "
-        "consistently; with relocalisation_evidence run, the whole map's look-alikes are answered by the evidence "
-        "the keyframes must show together, which grows with the stored keyframes",
+        "consistently: more than matching.consecutive, since a search of the whole map meets more look-alikes",
     )
     relocalisation_evidence: Literal["keyframe", "run"] = Field(
         "run",
