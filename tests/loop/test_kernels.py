@@ -270,3 +270,15 @@ def test_label_codes_are_equal_where_the_labels_are_across_calls() -> None:
     (first,) = kernels.label_codes(("car", "truck", "car"))
     second, third = kernels.label_codes(["truck", "bicycle"], ("car",))
     assert first[0] == first[2] == third[0] != first[1] == second[0] != second[1]
+
+
+def test_a_side_without_objects_misses_nothing_and_covers_no_ground() -> None:
+    points, covariances = _scene(np.random.default_rng(8), 5)
+    codes, known = np.zeros(5, dtype=np.int64), np.ones(5, dtype=bool)
+    empty = (np.zeros((0, 2)), np.zeros(0, dtype=np.int64), np.zeros((0, 2, 2)), np.zeros(0, dtype=bool), np.zeros(2))
+    for margin in (0.0, 2.0):
+        here, there = kernels.missed_objects(
+            (points, codes, covariances, known, np.zeros(2)), empty, margin, (1.0, 9.2, 0.1, True)
+        )
+        assert not here.any() and len(there) == 0
+    assert kernels.ground(np.zeros((0, 2)), np.array([3.0, 4.0])) == (3.0, 4.0, -np.inf)

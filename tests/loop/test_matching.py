@@ -538,3 +538,11 @@ def test_a_point_is_in_view_within_the_angle_of_one_of_the_views() -> None:
     points = np.array([[20.0, 5.0], [-20.0, 0.0], [10.0, 30.0], [12.0, -10.0]])
     assert verification.in_view(points, views, 30.0).tolist() == [True, False, True, False]
     assert verification.in_view(points, views, 180.0).all()
+
+
+def test_a_keyframe_without_objects_matches_nothing(make_keyframe) -> None:
+    empty = make_keyframe(np.zeros((0, 3)), [])
+    full = make_keyframe(np.array([[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [0.0, 3.0, 0.0], [5.0, 5.0, 0.0]]), ["car"] * 4)
+    for query, stored in ((empty, full), (full, empty), (empty, empty)):
+        match = match_keyframes(query, stored, MatchingConfig(), E_MAX)
+        assert not match.verified and len(match.pairs) == 0

@@ -105,7 +105,8 @@ def match_side(keyframe: Keyframe | MatchSide, config: MatchingConfig) -> MatchS
     """The keyframe's side of a match (a MatchSide is given back as it is)."""
     if isinstance(keyframe, MatchSide):
         return keyframe
-    patches = np.asarray(keyframe.patches.reshape(len(keyframe.patches), -1), dtype=float)
+    rows = keyframe.patches
+    patches = np.asarray(rows.reshape(len(rows), int(np.prod(rows.shape[1:]))), dtype=float)  # 0 rows too
     variances = None if config.tolerances == "fixed" else distance_variances(keyframe, config.centre_sigma)
     (codes,) = kernels.label_codes(keyframe.labels)
     return MatchSide(keyframe, codes, patches, (patches**2).sum(1), variances)

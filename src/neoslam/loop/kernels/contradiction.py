@@ -47,7 +47,10 @@ def counterparts(
 @njit(cache=True)
 def ground(centres: np.ndarray, robot: np.ndarray) -> tuple[float, float, float]:
     """Centre (x, y) and radius of the ground a keyframe covers: its object nearest the robot (the first of equally
-    near ones) and the farthest of its objects from that one."""
+    near ones) and the farthest of its objects from that one; a keyframe without objects covers none (radius -inf,
+    at the robot)."""
+    if len(centres) == 0:
+        return robot[0], robot[1], -math.inf
     nearest, nearest_distance = 0, math.inf
     for i in range(len(centres)):
         distance = math.sqrt((centres[i, 0] - robot[0]) ** 2 + (centres[i, 1] - robot[1]) ** 2)
