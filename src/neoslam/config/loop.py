@@ -232,7 +232,7 @@ class MatchingConfig(Section):
         ge=1,
         le=1_000_000,
         description="merged places kept for the queries that follow, the least recently matched dropped first: a "
-        "drive matches the few dozen places around it again and again, and a place holds about 60 kB",
+        "drive matches the few dozen places around it again and again, and a place holds about 35 kB",
     )
     recentre_places: bool = Field(
         True,

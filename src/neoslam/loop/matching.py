@@ -35,6 +35,7 @@ import numpy as np
 from neoslam.config import MatchingConfig
 from neoslam.loop import kernels
 from neoslam.loop.verification import (
+    centre_floor,
     contradicted_objects,
     contradictions,
     evidence_from,
@@ -132,7 +133,7 @@ def candidate_assignments(
 def distance_variances(keyframe: Keyframe, centre_sigma: float) -> np.ndarray:
     """(n, n) variance of each pairwise distance e_ij (eq. 1), from the two centres' ground-plane covariances along
     the line between them, each with `centre_sigma` added."""
-    return kernels.distance_variances(kernels.plane(keyframe.centers), keyframe.covariances, 2.0 * centre_sigma**2)
+    return kernels.distance_variances(kernels.plane(keyframe.centers), keyframe.covariances, centre_floor(centre_sigma))
 
 
 def affinity_matrix(

@@ -58,6 +58,7 @@ __all__ = [
     "has_counterpart",
     "in_view",
     "chi2_bound",
+    "centre_floor",
     "pair_evidence",
     "evidence_bits",
     "evidence_from",
@@ -72,11 +73,16 @@ def chi2_bound(probability: float, dof: int) -> float:
     return float(chi2.ppf(probability, dof))
 
 
+def centre_floor(centre_sigma: float) -> float:
+    """The variance `matching.centre_sigma` adds along each axis to a pair of centres (both of them): 2 σ_c²."""
+    return 2.0 * centre_sigma**2
+
+
 def pair_covariances(query_cov: np.ndarray, stored_cov: np.ndarray, yaw: float, centre_sigma: float) -> np.ndarray:
     """(k, 2, 2) covariance of each pair's ground-plane residual under a fit turned by `yaw`:
     C = R Σ_q Rᵀ + Σ_s + 2 σ_c² I."""
     return kernels.pair_covariances(
-        np.asarray(query_cov, dtype=float), np.asarray(stored_cov, dtype=float), float(yaw), 2.0 * centre_sigma**2
+        np.asarray(query_cov, dtype=float), np.asarray(stored_cov, dtype=float), float(yaw), centre_floor(centre_sigma)
     )
 
 
@@ -99,7 +105,7 @@ def _pair_columns(
 ) -> np.ndarray:
     return kernels.pair_columns(
         np.asarray(query, dtype=float), np.asarray(stored, dtype=float), np.asarray(query_cov, dtype=float),
-        np.asarray(stored_cov, dtype=float), 2.0 * centre_sigma**2,
+        np.asarray(stored_cov, dtype=float), centre_floor(centre_sigma),
     )  # fmt: skip
 
 
@@ -186,7 +192,7 @@ def _counterpart_tolerances(config: MatchingConfig) -> tuple[float, float, float
     """What kernels.counterparts asks: the radius, the d² gate, the floor of a centre's covariance and whether the
     covariances count (`tolerances: covariance`)."""
     return (
-        config.contradiction_radius, chi2_bound(config.inlier_probability, 2), 2.0 * config.centre_sigma**2,
+        config.contradiction_radius, chi2_bound(config.inlier_probability, 2), centre_floor(config.centre_sigma),
         config.tolerances != "fixed",
     )  # fmt: skip
 
@@ -246,7 +252,7 @@ def pair_evidence(
     shares = label_shares or {}
     label_shares_of_pairs = np.array([shares.get(query.labels[i], 1.0) for i in pairs[:, 0].tolist()])
     bits, spent = kernels.pair_bits(
-        query.covariances[pairs[:, 0]], stored.covariances[pairs[:, 1]], fit.yaw, 2.0 * config.centre_sigma**2,
+        query.covariances[pairs[:, 0]], stored.covariances[pairs[:, 1]], fit.yaw, centre_floor(config.centre_sigma),
         np.asarray(fit.d2, dtype=float), label_shares_of_pairs, config.object_area,
     )  # fmt: skip
     return bits, float(spent)
