@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from tests.mapping.objects_seen import FakeObjectMap, object_positions
 
 from neoslam.config import ExperienceMapConfig
 from neoslam.geometry import make_pose, relative_pose
@@ -20,20 +21,26 @@ STILL = CellState(np.zeros(3), 0.0)
 VELOCITIES = (np.array([1.0, 0.0, 0.0]), np.zeros(3))
 
 
-def two_lap_map(square, wrong: bool, noise=None, **update) -> tuple[ExperienceMap, np.ndarray, int]:
+def two_lap_map(
+    square, wrong: bool, noise=None, landmarks: bool = False, **update
+) -> tuple[ExperienceMap, np.ndarray, int]:
     """Two laps of the yaw-biased square; the second lap closes with the first at each corner (every 25 frames) at
     the true relative pose, and with `wrong` one closure (frame 140 onto frame 40) is 20 m off. The odometry model
     is honest about the square's bias (or as `update` states it, with the odometry's `noise` per root second given
-    as the session's estimate; a frame a second), every closure passes the gate. Returns the map, the truth and the
-    wrong link's index."""
+    as the session's estimate; a frame a second), every closure passes the gate. With `landmarks`, the objects
+    along the square's sides are landmarks of the pose graph (iSAM2), seen from each experience's true pose.
+    Returns the map, the truth and the wrong link's index."""
     config = ExperienceMapConfig(
         odometry_yaw_sigma_per_root_metre=0.01 * np.sqrt(square.step_m),
         odometry_sigma_per_root_metre=0.05 * np.sqrt(square.step_m),
         closure_gate="none",
         reuse_places=False,
-    ).model_copy(update=update)
+    ).model_copy(update={"object_landmarks": landmarks, **update})
     experience_map = ExperienceMap(config, (36, 36, 36), 36)
     experience_map.backend.odometry_noise = noise
+    objects, positions = FakeObjectMap(), object_positions(square)
+    if landmarks:
+        experience_map.backend.landmark_source = objects
     truth = square.truth(laps=2)
     odometry = square.dead_reckoned(truth)
     wrong_link = -1
@@ -41,7 +48,10 @@ def two_lap_map(square, wrong: bool, noise=None, **update) -> tuple[ExperienceMa
     for frame, pose in enumerate(odometry):
         travelled = 0.0 if frame == 0 else float(np.linalg.norm(pose[:3, 3] - odometry[frame - 1][:3, 3]))
         keyframe = frame // KEYFRAME_EVERY if frame % KEYFRAME_EVERY == 0 else None
+        made = len(experience_map.experiences)
         experience_map.step(frame, pose, VELOCITIES, STILL, travelled, keyframe, elapsed_s=0.0 if frame == 0 else 1.0)
+        for experience in experience_map.experiences[made:]:
+            objects.see(experience.id, truth[experience.frame_index], positions, np.arange(len(positions)))
         if keyframe is None or frame < square.lap or (frame % square.side_nodes and frame != 140):
             continue
         matched = keyframe - per_lap
@@ -75,6 +85,30 @@ def test_a_wrong_closure_is_withdrawn_and_the_map_recovers(biased_square) -> Non
     assert kept.withdrawn_links == []
     assert trajectory_error(healed, truth) <= 1.05 * trajectory_error(clean, truth)
     assert trajectory_error(kept, truth) > 1.5 * trajectory_error(clean, truth)
+
+
+def test_with_object_landmarks_a_wrong_closure_is_withdrawn_from_the_solver_and_the_map_recovers(
+    biased_square,
+) -> None:
+    clean, truth, _ = two_lap_map(biased_square, wrong=False, landmarks=True)
+    healed, _, wrong_link = two_lap_map(biased_square, wrong=True, landmarks=True)
+    kept, _, _ = two_lap_map(biased_square, wrong=True, landmarks=True, withdraw_sigmas=0.0)
+
+    assert clean.backend.landmark_solver is not None and clean.backend.landmark_solver.landmarks
+    assert clean.withdrawn_links == []
+    assert healed.withdrawn_links == [wrong_link]
+    assert kept.withdrawn_links == []
+    assert trajectory_error(healed, truth) <= 1.05 * trajectory_error(clean, truth)
+    # kept, the map still holds the wrong link, though the landmarks keep the map from following it; healed, the
+    # link is out of the graph and its factor out of the solver
+    assert kept.graph.link_residuals()[wrong_link] > 0.5 * WRONG_OFFSET_M
+    assert wrong_link not in healed.graph.live()
+    solver = healed.backend.landmark_solver
+    assert wrong_link not in solver._loop_factors
+    in_solver = solver._isam.getFactorsUnsafe()  # each loop link's factor where the solver holds it
+    for link_index, factor in solver._loop_factors.items():
+        link = healed.graph.links[link_index]
+        assert list(in_solver.at(factor).keys()) == [link.source, link.target]
 
 
 def test_a_withdrawn_pair_can_be_linked_again(biased_square) -> None:

@@ -68,9 +68,10 @@ class ExperienceMapConfig(Section):
         3.0,
         ge=0,
         le=1000,
-        description="pose graph (without object landmarks): after each optimisation the loop link the map disagrees "
-        "with most beyond this many standard deviations (its whitened residual) is withdrawn and the map solved again "
-        "without it, until every loop link agrees: a wrong closure the gate let through is undone; 0: never",
+        description="pose graph: after each optimisation the loop link the map disagrees with most beyond this many "
+        "standard deviations (its whitened residual) is withdrawn and the map solved again without it, until every "
+        "loop link agrees: a wrong closure the gate let through is undone (with object landmarks, judged by the pose "
+        "graph of odometry and loop links and removed from the landmark solver); 0: never",
     )
     object_landmarks: bool = Field(
         False,

@@ -32,6 +32,7 @@ How the object map's life maps onto iSAM2, which only ever adds:
   map itself gives; as a tight factor it held true loops of KITTI 00 2-5 m open);
 - a view of a landmark made more than `localised_distance` metres of travel ago is added only while the robot knows
   where it is (see `_trusted`): an association by a drifted pose is a guess, and a consistent wrong one is no outlier;
+- a loop link withdrawn (neoslam.mapping.healing) has its factor removed from the solver, which iSAM2 allows;
 - a map restored from a store or a join of two parts (a rigid move) rebuilds the solver from the graph: rare events.
 Only the robot's part of the map is solved (a stored session not yet joined keeps its frame and its poses).
 """
@@ -83,7 +84,9 @@ class LandmarkSolver:
     def __init__(self, config: ExperienceMapConfig) -> None:
         self.config = config
         self._isam = _isam("CHOLESKY")
-        self._factors = gtsam.NonlinearFactorGraph()  # every factor added: what a fallback to QR starts from
+        self._factors = gtsam.NonlinearFactorGraph()  # every factor added, at its index in the solver
+        self._loop_factors: dict[int, int] = {}  # loop link (index into graph.links) -> its factor's index
+        self._removed: list[int] = []  # factors of withdrawn loop links, removed from the solver
         self._nodes = np.zeros(0, dtype=int)  # experiences in the solver, ascending
         self._links = 0  # graph.links added (the graph only appends links between rebuilds)
         self._merges = 0  # object-map merges followed
@@ -122,13 +125,26 @@ class LandmarkSolver:
         state = source.state()
         self._follow_merges(source)
         self._add_observations(source, state, left, current, factors, values)
+        self._solve(graph, factors, values, [], iterations)
+
+    def withdraw(self, links: list[int], graph: MapGraph) -> None:
+        """Remove loop links' factors (indices into graph.links) and solve again, LOOP_ITERATIONS more steps: the
+        map moves back by as much as the links had bent it; graph.poses of the part corrected in place."""
+        factors = [self._loop_factors.pop(link) for link in links if link in self._loop_factors]
+        self._removed += factors
+        self._solve(graph, gtsam.NonlinearFactorGraph(), gtsam.Values(), factors, LOOP_ITERATIONS)
+
+    def _solve(self, graph: MapGraph, factors, values, remove: list[int], iterations: int) -> None:
+        """One iSAM2 update with the new factors and values, less the factors `remove`, then `iterations` more
+        steps; graph.poses of the part set from the solution."""
         self._factors.push_back(factors)
         try:
-            self._isam.update(factors, values)
+            self._isam.update(factors, values, remove)
         except RuntimeError:  # GTSAM's indeterminate linear system: see _isam
             self._isam = _isam("QR")
             values.insert(self._estimate)
-            self._isam.update(self._factors, values)
+            self._isam.update(self._factors, values)  # indices as before: the factors in the order added
+            self._isam.update(gtsam.NonlinearFactorGraph(), gtsam.Values(), self._removed)
         for _ in range(iterations):
             self._isam.update()
         self._estimate = self._isam.calculateEstimate()
@@ -159,6 +175,8 @@ class LandmarkSolver:
             if index in withdrawn:
                 continue
             if link.source in inside and link.target in inside:  # a link always ties one part: both or neither
+                if link.kind == "loop":  # its factor's index in the solver once added
+                    self._loop_factors[index] = self._factors.size() + factors.size()
                 noise = link_noise_model(link, self.config, self.odometry_noise)
                 factors.add(gtsam.BetweenFactorPose3(link.source, link.target, gtsam.Pose3(link.relative), noise))
         self._links = len(graph.links)
