@@ -163,21 +163,23 @@ class MapBackend:
         return replace(report, loops=loops)
 
     def _solve_landmarks_healed(self, experience_map: CorrectedMap, iterations: int, final: bool = False) -> list[int]:
-        """The landmark solver brought up to date at a loop, and the loop links the pose graph of the part (odometry
-        and loop links, no landmarks) disagrees with withdrawn from it (see _optimise_part). The pose graph judges
+        """At a loop: the loop links the pose graph of the robot's part (odometry and loop links, no landmarks; solved
+        apart, the map stays) disagrees with withdrawn first (see _optimise_part), then the landmark solver brought up
+        to date with the links left, and the factors of withdrawn links it held removed. The pose graph judges
         because a landmark solution can disagree with true loop links: views a robot back in known streets associated
         by a drifted pose before a closure recognised them hold the map where it was (on simulated KITTI 00, judged by
-        the landmark solution, a whole revisit's true links were withdrawn one after another)."""
-        self._solve_landmarks(experience_map, iterations, final)
-        if self.config.withdraw_sigmas <= 0:
-            return []
-        graph, parts = experience_map.graph, experience_map.parts
-        judged = MapGraph(graph.poses.copy(), graph.links, list(graph.withdrawn))  # solved apart: the map stays
-        withdrawn = self._optimise_part(judged, parts.members(parts.part_of(experience_map.current)))
-        if withdrawn:
+        the landmark solution, a whole revisit's true links were withdrawn one after another). Judged first, a wrong
+        link never bends the landmark solution, nor the object associations made on it."""
+        withdrawn: list[int] = []
+        if self.config.withdraw_sigmas > 0:
+            graph, parts = experience_map.graph, experience_map.parts
+            judged = MapGraph(graph.poses.copy(), graph.links, list(graph.withdrawn))
+            withdrawn = self._optimise_part(judged, parts.members(parts.part_of(experience_map.current)))
             graph.withdrawn += withdrawn
+        self._solve_landmarks(experience_map, iterations, final)
+        if withdrawn:  # links the solver held from earlier loops
             assert self._landmarks is not None
-            self._landmarks.withdraw(withdrawn, graph)
+            self._landmarks.withdraw(withdrawn, experience_map.graph)
         return withdrawn
 
     def _landmarks_due(self, experience_map: CorrectedMap) -> bool:

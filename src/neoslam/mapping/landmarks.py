@@ -131,6 +131,8 @@ class LandmarkSolver:
         """Remove loop links' factors (indices into graph.links) and solve again, LOOP_ITERATIONS more steps: the
         map moves back by as much as the links had bent it; graph.poses of the part corrected in place."""
         factors = [self._loop_factors.pop(link) for link in links if link in self._loop_factors]
+        if not factors:
+            return  # none of them was added
         self._removed += factors
         self._solve(graph, gtsam.NonlinearFactorGraph(), gtsam.Values(), factors, LOOP_ITERATIONS)
 
