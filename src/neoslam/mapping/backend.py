@@ -92,12 +92,10 @@ class MapBackend:
         if self.config.backend != "pose-graph":
             return []
         start = time.perf_counter()
-        withdrawn: list[int] = []
         if self.uses_landmarks:
             withdrawn = self._solve_landmarks_healed(experience_map, LOOP_ITERATIONS)
         else:
-            parts = experience_map.parts
-            withdrawn = self._optimise_part(experience_map.graph, parts.members(parts.part_of(experience_map.current)))
+            withdrawn = self._optimise_part(experience_map.graph, _robot_part(experience_map))
         self.seconds += time.perf_counter() - start
         return withdrawn
 
@@ -112,7 +110,7 @@ class MapBackend:
             measurements = self._measurements
             parts = experience_map.parts
             if len(parts.roots()) > 1:  # the robot's part only: a stored session not joined stays as stored
-                part = parts.members(parts.part_of(experience_map.current))
+                part = _robot_part(experience_map)
                 measurements = [m for m in measurements if part[m[0]]]
             relax(experience_map.graph, measurements, self.config.correction_factor, self.config.correction_loops)
 
@@ -172,9 +170,9 @@ class MapBackend:
         link never bends the landmark solution, nor the object associations made on it."""
         withdrawn: list[int] = []
         if self.config.withdraw_sigmas > 0:
-            graph, parts = experience_map.graph, experience_map.parts
+            graph = experience_map.graph
             judged = MapGraph(graph.poses.copy(), graph.links, list(graph.withdrawn))
-            withdrawn = self._optimise_part(judged, parts.members(parts.part_of(experience_map.current)))
+            withdrawn = self._optimise_part(judged, _robot_part(experience_map))
             graph.withdrawn += withdrawn
         self._solve_landmarks(experience_map, iterations, final)
         if withdrawn:  # links the solver held from earlier loops
@@ -205,3 +203,9 @@ class MapBackend:
         self._landmarks.odometry_noise = self.odometry_noise
         self._landmarks.update(graph, parts.members(part), self.landmark_source, left, current, iterations)
         self._solved_visit = visits - 1
+
+
+def _robot_part(experience_map: CorrectedMap) -> np.ndarray:
+    """The experiences of the robot's part of the map (a mask over all)."""
+    parts = experience_map.parts
+    return parts.members(parts.part_of(experience_map.current))
