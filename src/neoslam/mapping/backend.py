@@ -165,9 +165,10 @@ class MapBackend:
         apart, the map stays) disagrees with withdrawn first (see _optimise_part), then the landmark solver brought up
         to date with the links left, and the factors of withdrawn links it held removed. The pose graph judges
         because a landmark solution can disagree with true loop links: views a robot back in known streets associated
-        by a drifted pose before a closure recognised them hold the map where it was (on simulated KITTI 00, judged by
-        the landmark solution, a whole revisit's true links were withdrawn one after another). Judged first, a wrong
-        link never bends the landmark solution, nor the object associations made on it."""
+        by a drifted pose before a closure recognised them hold the map where it was, and an incremental solution
+        may not have converged (on simulated KITTI 00, judged by the landmark solution updated every fourth
+        experience, a whole revisit's true links were withdrawn one after another). Judged first, a wrong link never
+        bends the landmark solution."""
         withdrawn: list[int] = []
         if self.config.withdraw_sigmas > 0:
             graph = experience_map.graph
