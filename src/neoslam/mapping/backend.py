@@ -7,9 +7,8 @@ Only the robot's part of the map is corrected: a stored session not joined yet s
 Each pose-graph optimisation (with landmarks, each iSAM2 update at a loop) re-checks every loop link of that part
 (`withdraw_sigmas`): the one the optimised map disagrees with most, beyond that many standard deviations, is
 withdrawn and the part solved again without it, until every loop link agrees (a map that heals from a wrong
-closure; neoslam.mapping.healing). Odometry links are
-weighted by the metres and, with `odometry_noise` given (the noise the session estimates online, per root second),
-the seconds they span.
+closure; neoslam.mapping.healing). Odometry links are weighted by the metres and, with `odometry_noise` given (the
+noise the session estimates online, per root second), the seconds they span.
 The back end keeps the links' measurements (relaxation) and the landmark solver; the experience map owns the graph.
 """
 

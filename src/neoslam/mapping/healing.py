@@ -6,10 +6,10 @@ optimisation every loop link of the part solved is re-checked against the soluti
 is largest, beyond `withdraw_sigmas` standard deviations (a Huber kernel at 3 sigma then weighs it at most a third),
 is withdrawn, and the part is solved again without it, until every loop link agrees. With object landmarks the
 loop links are judged the same way, by the pose graph of odometry and loop links, and a withdrawn link's factor is
-removed from the landmark solver (neoslam.mapping.backend). A link that is the only tie
-between two stretches of the part (the link that joined a later session to the map) is never withdrawn: without it
-the part falls apart and its frame is lost. A true closure only disagrees when the odometry since the map last
-closed a loop has drifted far more than its noise model allows; the benchmark counts such withdrawals.
+removed from the landmark solver (neoslam.mapping.backend). A link that is the only tie between two stretches of
+the part (the link that joined a later session to the map) is never withdrawn: without it the part falls apart and
+its frame is lost. A true closure only disagrees when the odometry since the map last closed a loop has drifted
+far more than its noise model allows; the benchmark counts such withdrawals.
 """
 
 from __future__ import annotations
