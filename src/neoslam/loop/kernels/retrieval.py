@@ -8,7 +8,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["triangle_scores"]
+__all__ = ["triangle_keys", "triangle_scores", "within_reach"]
 
 
 @njit(cache=True)
