@@ -22,14 +22,15 @@ VELOCITIES = (np.array([1.0, 0.0, 0.0]), np.zeros(3))
 
 
 def two_lap_map(
-    square, wrong: bool, noise=None, landmarks: bool = False, **update
+    square, wrong: bool, noise=None, landmarks: bool = False, until: int | None = None, **update
 ) -> tuple[ExperienceMap, np.ndarray, int]:
     """Two laps of the yaw-biased square; the second lap closes with the first at each corner (every 25 frames) at
     the true relative pose, and with `wrong` one closure (frame 140 onto frame 40) is 20 m off. The odometry model
     is honest about the square's bias (or as `update` states it, with the odometry's `noise` per root second given
     as the session's estimate; a frame a second), every closure passes the gate. With `landmarks`, the objects
-    along the square's sides are landmarks of the pose graph (iSAM2), seen from each experience's true pose.
-    Returns the map, the truth and the wrong link's index."""
+    along the square's sides are landmarks of the pose graph (iSAM2), seen from each experience's true pose;
+    `until`: the map as the closure at that frame leaves it, not finished. Returns the map, the truth and the wrong
+    link's index."""
     config = ExperienceMapConfig(
         odometry_yaw_sigma_per_root_metre=0.01 * np.sqrt(square.step_m),
         odometry_sigma_per_root_metre=0.05 * np.sqrt(square.step_m),
@@ -64,6 +65,8 @@ def two_lap_map(
             wrong_link = len(experience_map.graph.links)
         closure = LoopClosure(frame, matched * KEYFRAME_EVERY, keyframe, matched, 3.0, 6, relative)
         assert experience_map.close_loop(closure, STILL)
+        if frame == until:
+            return experience_map, truth, wrong_link
     experience_map.finish()
     return experience_map, truth, wrong_link
 
@@ -109,6 +112,16 @@ def test_with_object_landmarks_a_wrong_closure_is_withdrawn_from_the_solver_and_
     for link_index, factor in solver._loop_factors.items():
         link = healed.graph.links[link_index]
         assert list(in_solver.at(factor).keys()) == [link.source, link.target]
+
+
+def test_a_withdrawn_closure_leaves_the_robot_not_localised(biased_square) -> None:
+    """The closure that localised the robot was the wrong one: once withdrawn, no experience is re-entered by
+    position (nor an old landmark view trusted) until the next recognised place."""
+    clean, _, _ = two_lap_map(biased_square, wrong=False, until=125)
+    healed, _, wrong_link = two_lap_map(biased_square, wrong=True, until=140)
+    assert clean.localised
+    assert healed.withdrawn_links == [wrong_link]
+    assert not healed.localised
 
 
 def test_a_withdrawn_pair_can_be_linked_again(biased_square) -> None:
