@@ -50,8 +50,9 @@ def planning_speed(result: dict[str, Any]) -> Figure:
 
 
 def loop_query_speed(result: dict[str, Any]) -> Figure:
-    """The loop detector's query time against the number of stored keyframes, a line per variant (loops, speed)."""
-    rows = _rows(result, "speed")
+    """The loop detector's query time against the number of stored keyframes, a line per variant (loops, speed), on
+    the map of distinct places."""
+    rows = [r for r in _rows(result, "speed") if r.get("map", "distinct") == "distinct"]
     figure, axes = _axes("Loop query against stored keyframes", "stored keyframes", "ms a query (median)")
     variants = sorted({(r["eigenvector"], r["scope"]) for r in rows})
     for eigenvector, scope in variants:
