@@ -114,14 +114,27 @@ def test_with_object_landmarks_a_wrong_closure_is_withdrawn_from_the_solver_and_
         assert list(in_solver.at(factor).keys()) == [link.source, link.target]
 
 
-def test_a_withdrawn_closure_leaves_the_robot_not_localised(biased_square) -> None:
+@pytest.mark.parametrize(
+    ("rule", "landmarks", "unlocalised"),
+    [
+        ("with-landmarks", True, True),
+        ("with-landmarks", False, False),
+        ("always", False, True),
+        ("never", True, False),
+    ],
+)
+def test_a_withdrawn_closure_leaves_the_robot_not_localised_as_configured(
+    biased_square, rule: str, landmarks: bool, unlocalised: bool
+) -> None:
     """The closure that localised the robot was the wrong one: once withdrawn, no experience is re-entered by
-    position (nor an old landmark view trusted) until the next recognised place."""
-    clean, _, _ = two_lap_map(biased_square, wrong=False, until=125)
-    healed, _, wrong_link = two_lap_map(biased_square, wrong=True, until=140)
+    position (nor an old landmark view trusted) until the next recognised place, with landmarks by default."""
+    clean, _, _ = two_lap_map(biased_square, wrong=False, landmarks=landmarks, until=125, unlocalise_on_withdrawal=rule)
+    healed, _, wrong_link = two_lap_map(
+        biased_square, wrong=True, landmarks=landmarks, until=140, unlocalise_on_withdrawal=rule
+    )
     assert clean.localised
     assert healed.withdrawn_links == [wrong_link]
-    assert not healed.localised
+    assert healed.localised != unlocalised
 
 
 def test_a_withdrawn_pair_can_be_linked_again(biased_square) -> None:

@@ -73,6 +73,14 @@ class ExperienceMapConfig(Section):
         "loop link agrees: a wrong closure the gate let through is undone (with object landmarks, judged by the pose "
         "graph of odometry and loop links and removed from the landmark solver); 0: never",
     )
+    unlocalise_on_withdrawal: Literal["never", "with-landmarks", "always"] = Field(
+        "with-landmarks",
+        description="whether a withdrawn loop link leaves the robot not localised until the next recognised place "
+        "(no experience re-entered by position, no view of an old landmark added): with object landmarks a visit to "
+        "the place a wrong closure put the robot at leaves views there in the solver; without them a re-entry adds "
+        "nothing to the map, and with odometry noisier than the pose graph's model (simulated heavy) the links "
+        "withdrawn are mostly true ones, after which re-entering the map by position keeps the trajectory on it",
+    )
     object_landmarks: bool = Field(
         False,
         description="pose graph: the object map's confirmed objects become landmarks (a Point3 each, a bearing-range "

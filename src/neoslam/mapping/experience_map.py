@@ -21,11 +21,11 @@ the closure's fit. Coming from an experience it made since it last knew where it
 one (a loop link, once per pair), which ties it to the map; coming from a stored experience, nothing is added (the map
 holds that relation). A closure the map disagrees with (the robot is back after a long loop and the map is off) does
 what the paper does: the keyframe gets its own experience and a loop link that corrects the map, until the map agrees.
-For `localised_distance` metres after a recognised place the robot knows where it is (until the back end withdraws a
-loop link: a place was recognised wrongly), and a new keyframe or a move of the cells that finds an experience within
-`reuse_radius` of the corrected pose, heading the same way, re-enters that experience too (no link). Frames keep the
-experience they were in and where the robot entered it (a visit), so the trajectory is the same whichever way the map
-was built.
+For `localised_distance` metres after a recognised place the robot knows where it is (with object landmarks, until the
+back end withdraws a loop link: `unlocalise_on_withdrawal`), and a new keyframe or a move of the cells that finds an
+experience within `reuse_radius` of the corrected pose, heading the same way, re-enters that experience too (no link).
+Frames keep the experience they were in and where the robot entered it (a visit), so the trajectory is the same
+whichever way the map was built.
 
 Sessions (beyond the paper, neoslam.store): the map can start from a stored one (`restore`). The session's first
 experience then starts a part of the map of its own, in the session's frame; the first closure with a stored
@@ -134,6 +134,11 @@ class ExperienceMap:
         return np.frombuffer(self._visit_experience, dtype=self._visit_experience.typecode)
 
     @property
+    def _unlocalises_on_withdrawal(self) -> bool:
+        rule = self.config.unlocalise_on_withdrawal
+        return rule == "always" or (rule == "with-landmarks" and self.config.object_landmarks)
+
+    @property
     def localised(self) -> bool:
         """Whether a place was recognised within the last `localised_distance` metres of travel."""
         return self._odometer - self._localised_at <= self.config.localised_distance
@@ -226,11 +231,13 @@ class ExperienceMap:
     def _unlink(self, withdrawn: list[int]) -> None:
         """Links the back end withdrew: their pairs are not linked any more (unless another link joins them), so
         that a later closure between the two may link them again. A withdrawn link was a place recognised wrongly,
-        perhaps the one the robot last knew where it was by: it no longer counts as localised until the next place
-        recognised (no experience re-entered by position, no old landmark view trusted on that ground)."""
+        perhaps the one the robot last knew where it was by: as `unlocalise_on_withdrawal` says, it no longer counts
+        as localised until the next place recognised (no experience re-entered by position, no old landmark view
+        trusted on that ground)."""
         if not withdrawn:
             return
-        self._localised_at = -np.inf
+        if self._unlocalises_on_withdrawal:
+            self._localised_at = -np.inf
         live = {(min(k.source, k.target), max(k.source, k.target)) for k in self.graph.live_links()}
         for index in withdrawn:
             link = self.graph.links[index]
