@@ -134,11 +134,6 @@ class ExperienceMap:
         return np.frombuffer(self._visit_experience, dtype=self._visit_experience.typecode)
 
     @property
-    def _unlocalises_on_withdrawal(self) -> bool:
-        rule = self.config.unlocalise_on_withdrawal
-        return rule == "always" or (rule == "with-landmarks" and self.config.object_landmarks)
-
-    @property
     def localised(self) -> bool:
         """Whether a place was recognised within the last `localised_distance` metres of travel."""
         return self._odometer - self._localised_at <= self.config.localised_distance
@@ -230,13 +225,12 @@ class ExperienceMap:
 
     def _unlink(self, withdrawn: list[int]) -> None:
         """Links the back end withdrew: their pairs are not linked any more (unless another link joins them), so
-        that a later closure between the two may link them again. A withdrawn link was a place recognised wrongly,
-        perhaps the one the robot last knew where it was by: as `unlocalise_on_withdrawal` says, it no longer counts
-        as localised until the next place recognised (no experience re-entered by position, no old landmark view
-        trusted on that ground)."""
+        that a later closure between the two may link them again. The robot may have known where it was by a place
+        recognised wrongly: as `unlocalise_on_withdrawal` says, it is not localised until the next place recognised."""
         if not withdrawn:
             return
-        if self._unlocalises_on_withdrawal:
+        rule = self.config.unlocalise_on_withdrawal
+        if rule == "always" or (rule == "with-landmarks" and self.config.object_landmarks):
             self._localised_at = -np.inf
         live = {(min(k.source, k.target), max(k.source, k.target)) for k in self.graph.live_links()}
         for index in withdrawn:
