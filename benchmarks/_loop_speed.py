@@ -5,9 +5,9 @@ first when all are laid: on the `distinct` map each copy after the first has its
 field of its own (`displaced`: a few metres, alike for objects a few metres apart), so that it is one consistent world
 but another layout, as a map of 20,000 keyframes of different streets would be; on the `repeated` map the copies are
 exact, every place stored about ten times over (each revisit verifies in every copy: the worst case of a repeated
-layout). Every row (a map size and a scope, and the exact eigenvector at the largest size) has its
-own detector; the rows' queries are timed in turn, one query of each row after another, so that a machine busy for a
-while slows every row alike and the rows compare as a ratio within one run.
+layout). Every row (a map, a map size and a scope, and the exact eigenvector at the largest size) has its own
+detector; the rows' queries are timed in turn, one query of each row after another, so that a machine busy for a while
+slows every row alike and the rows compare as a ratio within one run.
 """
 
 from __future__ import annotations
@@ -104,8 +104,8 @@ def _row(
     scope: str,
 ) -> _Row:
     """A row's detector and queries on the map `layout` ("distinct" or "repeated", the stream laid so); `scope`
-    "drift-bounded" (the search radius round the estimate) or "whole map"
-    (every stored keyframe a candidate, as a later session or a lost robot searches)."""
+    "drift-bounded" (the search radius round the estimate) or "whole map" (every stored keyframe a candidate, as a
+    later session or a lost robot searches)."""
     config = load_config(environ={})
     if scope == "whole map":
         matching = matching.model_copy(update={"search_radius": WHOLE_MAP_M})
